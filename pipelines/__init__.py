@@ -1,0 +1,1 @@
+"""Pipeline stages, one module each; they depend on `assets` only."""
