@@ -1,0 +1,1 @@
+"""Synthetic samples and benchmark data with known truth."""
