@@ -1,1 +1,46 @@
-"""One writer per format: URDF, MJCF, USD."""
+"""One writer per format: URDF, MJCF, USD.
+
+Each writer takes an `assets.Asset` whose mesh files already lie under
+`out_dir` (paths in `asset.geometry` relative to it) and writes one file next
+to them, named after the asset. The body frame of every file is the object
+frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from assets import Asset
+
+from .mjcf import export_mjcf
+from .urdf import export_urdf
+from .usd import export_usd
+
+__all__ = ["ExportPaths", "export_all", "export_mjcf", "export_urdf", "export_usd"]
+
+
+@dataclass(frozen=True)
+class ExportPaths:
+    """The written files; keys match asset.json → files."""
+
+    urdf: Path
+    mjcf: Path
+    usd: Path
+
+    def to_json(self, relative_to: Path | None = None) -> dict[str, str]:
+        """{"urdf", "mjcf", "usd"} as strings, relative to `relative_to` when given."""
+        out = {}
+        for key in ("urdf", "mjcf", "usd"):
+            p = Path(getattr(self, key))
+            out[key] = str(p.relative_to(relative_to) if relative_to is not None else p)
+        return out
+
+
+def export_all(asset: Asset, out_dir: Path) -> ExportPaths:
+    """Write NAME.urdf, NAME.xml and NAME.usda into `out_dir`."""
+    return ExportPaths(
+        urdf=export_urdf(asset, out_dir),
+        mjcf=export_mjcf(asset, out_dir),
+        usd=export_usd(asset, out_dir),
+    )

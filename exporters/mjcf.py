@@ -1,0 +1,105 @@
+"""MJCF writer: the asset as a MuJoCo model file `NAME.xml`.
+
+The body frame is the object frame, placed at `asset.placement` on a free
+joint. Numbers are written with `repr` (shortest exact round trip) because
+`MjSpec.to_xml` rounds to 6 significant digits.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+
+from assets import Asset
+
+__all__ = ["export_mjcf"]
+
+_FREE_KINDS: tuple[str, ...] = ("free", "sliding")
+"""Kinds written as one body on a free joint (no support plane: DESIGN.md)."""
+
+# MuJoCo's defaults for the torsional and rolling coefficients; only sliding
+# friction is identified.
+_TORSION_FRICTION = 0.005
+_ROLL_FRICTION = 0.0001
+
+
+def _num(values) -> str:
+    """Space-separated shortest round-trip decimals."""
+    return " ".join(repr(float(v)) for v in np.ravel(values))
+
+
+def _mesh_name(rel_path: str) -> str:
+    return PurePosixPath(rel_path).stem
+
+
+def export_mjcf(asset: Asset, out_dir: Path) -> Path:
+    """Write `out_dir/NAME.xml` for a free (or sliding) rigid object.
+
+    Inertial: mass [kg], COM [m] and the full tensor about the COM [kg m^2],
+    object frame. Collision: one mesh geom per convex part with sliding
+    friction `asset.theta.friction.value`. Visual: a massless, non-colliding
+    mesh geom in group 2. Mesh paths in `asset.geometry` are relative to
+    `out_dir`.
+
+    Raises:
+        ValueError: for kinds other than "free"/"sliding", an unphysical inertia
+            tensor, no collision parts or clashing mesh file stems.
+    """
+    if asset.kind not in _FREE_KINDS:
+        raise ValueError(f"export_mjcf: kind {asset.kind!r} is not supported yet (only {_FREE_KINDS})")
+    out_dir = Path(out_dir)
+    path = out_dir / f"{asset.name}.xml"
+    mesh_paths = [asset.geometry.visual, *asset.geometry.collision]
+    if not asset.geometry.collision:
+        raise ValueError(f"{path}: asset {asset.name!r} has no collision parts")
+    names = [_mesh_name(p) for p in mesh_paths]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{path}: mesh file stems must be unique, got {names}")
+    # meshdir is the deepest folder holding every mesh, so file= stays short.
+    meshdir = os.path.commonpath([str(PurePosixPath(p).parent) for p in mesh_paths]) or "."
+
+    inertial = asset.theta.inertial()
+    if violation := inertial.physical_violation():
+        # MuJoCo rejects such a tensor and Newton silently "balances" it.
+        raise ValueError(f"{path}: cannot write asset {asset.name!r}: {violation}")
+    I = inertial.inertia_matrix()
+    mu = float(asset.theta.friction.value)
+    x, y, z, w = asset.placement.quaternion_xyzw
+
+    root = ET.Element("mujoco", model=asset.name)
+    ET.SubElement(root, "compiler", angle="radian", meshdir=meshdir, autolimits="true")
+    ET.SubElement(root, "option", gravity="0 0 -9.81")
+    assets_el = ET.SubElement(root, "asset")
+    for name, rel in zip(names, mesh_paths):
+        ET.SubElement(assets_el, "mesh", name=name, file=os.path.relpath(rel, meshdir).replace(os.sep, "/"))
+
+    world = ET.SubElement(root, "worldbody")
+    world.append(ET.Comment(" object frame at the scanned placement; no support plane for free objects "))
+    body = ET.SubElement(world, "body", name=asset.name, pos=_num(asset.placement.position), quat=_num((w, x, y, z)))
+    ET.SubElement(body, "freejoint", name=f"{asset.name}_free")
+    ET.SubElement(
+        body,
+        "inertial",
+        pos=_num(inertial.com),
+        mass=repr(inertial.mass),
+        # MuJoCo's order: Ixx Iyy Izz Ixy Ixz Iyz.
+        fullinertia=_num((I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])),
+    )
+    # density=0 keeps the visual mesh from adding mass if inertiafromgeom is ever forced on.
+    ET.SubElement(
+        body, "geom", name=names[0], type="mesh", mesh=names[0],
+        contype="0", conaffinity="0", density="0", group="2",
+    )
+    for name in names[1:]:
+        ET.SubElement(
+            body, "geom", name=name, type="mesh", mesh=name, group="3",
+            friction=_num((mu, _TORSION_FRICTION, _ROLL_FRICTION)),
+        )
+
+    ET.indent(root, space="  ")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path.write_text(ET.tostring(root, encoding="unicode") + "\n")
+    return path

@@ -1,0 +1,538 @@
+"""Reload the exported URDF, MJCF and USD files in real loaders and check them.
+
+Each file is read by two loaders (MJCF: MuJoCo and Newton; URDF: yourdfpy and
+Newton; USD: usd-core's UsdPhysics and Newton). For every loader the mass
+[kg], COM [m] and full inertia tensor about the COM [kg m^2], in the object
+frame, are compared with `asset.theta`; so are surface friction and the
+placement where the format and the loader carry them. Any disagreement above
+the tolerance, or any file a loader cannot read, raises `ValidationError`.
+
+Relative errors:
+    mass       |m - m0| / m0
+    com        |c - c0| / max(L, 1e-9 m), L the object size (the visual mesh's
+               bounding-box diagonal; sqrt(tr I / m) if that mesh is unreadable)
+    inertia    ||I - I0||_F / ||I0||_F
+    friction   |mu - mu0| / max(|mu0|, 1e-9)
+    placement  max(|p - p0| / max(|p0|, L), rotation angle [rad]); Newton keeps
+               poses in float32, hence |p0| in the scale
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from assets import Asset
+
+__all__ = ["DEFAULT_TOLERANCE", "LOADERS", "LoaderCheck", "ValidationError", "ValidationReport", "validate_exports"]
+
+DEFAULT_TOLERANCE = 1e-6
+"""Largest relative error accepted (float32 storage in USD and Newton is ~6e-8)."""
+
+_COM_FLOOR_M = 1e-9
+_MJ_STEPS = 100
+
+
+class ValidationError(Exception):
+    """An exported file that a loader cannot read, or reads with other values.
+
+    Attributes:
+        path: the offending file.
+        message: what went wrong.
+        report: the full `ValidationReport` when one was made, else None.
+    """
+
+    def __init__(self, path: Path | str, message: str, report: "ValidationReport | None" = None):
+        self.path = Path(path)
+        self.message = message
+        self.report = report
+        super().__init__(f"{self.path}: {message}")
+
+
+@dataclass(frozen=True)
+class LoaderCheck:
+    """What one loader read from one file, in the object frame, and how far off it is.
+
+    mass [kg]; com [m]; inertia [kg m^2] about the COM, object-frame axes;
+    friction unitless (None where the format or loader does not carry it);
+    placement position [m] and quaternion (x, y, z, w) of the body in world
+    (None where not carried, e.g. URDF). `*_error` are relative errors (see
+    the module docstring); `error` holds the load failure, if any.
+    """
+
+    loader: str
+    format: str
+    file: str
+    ok: bool
+    mass: float | None = None
+    com: tuple[float, float, float] | None = None
+    inertia: tuple[tuple[float, float, float], ...] | None = None
+    friction: float | None = None
+    position: tuple[float, float, float] | None = None
+    quaternion_xyzw: tuple[float, float, float, float] | None = None
+    mass_error: float | None = None
+    com_error: float | None = None
+    inertia_error: float | None = None
+    friction_error: float | None = None
+    placement_error: float | None = None
+    max_error: float | None = None
+    notes: tuple[str, ...] = ()
+    error: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return _jsonable(asdict(self))
+
+
+@dataclass(frozen=True)
+class ValidationReport:
+    """One `LoaderCheck` per loader and the overall verdict."""
+
+    ok: bool
+    tolerance: float
+    object_size_m: float
+    checks: tuple[LoaderCheck, ...]
+    expected: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (for asset.json provenance and the HTML report)."""
+        return {
+            "ok": self.ok,
+            "tolerance": self.tolerance,
+            "object_size_m": self.object_size_m,
+            "expected": _jsonable(self.expected),
+            "checks": [c.to_json() for c in self.checks],
+        }
+
+    def failures(self) -> tuple[LoaderCheck, ...]:
+        return tuple(c for c in self.checks if not c.ok)
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None  # NaN/inf are not JSON
+    return x
+
+
+@dataclass(frozen=True)
+class _Reading:
+    """Raw values a loader returned, object frame, SI."""
+
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray
+    friction: float | None = None
+    position: np.ndarray | None = None
+    quaternion_xyzw: np.ndarray | None = None
+    notes: tuple[str, ...] = ()
+
+
+def _rotation_from_wxyz(q) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    w, x, y, z = (float(v) for v in q)
+    return Rotation.from_quat([x, y, z, w]).as_matrix()
+
+
+def _collision_mu(values: list[float], loader: str) -> float:
+    """The one friction coefficient all collision shapes share."""
+    if len(set(values)) != 1:
+        raise ValueError(f"{loader} read different friction coefficients on the collision parts: {values}")
+    return values[0]
+
+
+# --- MJCF ---------------------------------------------------------------------------------------
+
+
+def _read_mujoco(asset: Asset, path: Path) -> _Reading:
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_path(str(path))
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, asset.name)
+    if body < 0:
+        raise ValueError(f"no body named {asset.name!r}")
+    R = _rotation_from_wxyz(model.body_iquat[body])
+    inertia = R @ np.diag(model.body_inertia[body]) @ R.T
+    geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body]
+    colliding = [g for g in geoms if model.geom_contype[g] or model.geom_conaffinity[g]]
+    if len(colliding) != len(asset.geometry.collision):
+        raise ValueError(f"expected {len(asset.geometry.collision)} colliding geoms, found {len(colliding)}")
+    mu = _collision_mu([float(model.geom_friction[g, 0]) for g in colliding], "MuJoCo")
+
+    # Step it: proves the model compiles into something that simulates.
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)  # xpos is zero until the first kinematics pass
+    z0 = float(data.xpos[body, 2])
+    for _ in range(_MJ_STEPS):
+        mujoco.mj_step(model, data)
+    if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
+        raise ValueError(f"state not finite after {_MJ_STEPS} steps")
+    drop_m = z0 - float(data.xpos[body, 2])
+    t_s = _MJ_STEPS * model.opt.timestep
+    free_fall_m = 0.5 * float(np.linalg.norm(model.opt.gravity)) * t_s**2
+    # Nothing to touch (no floor is written), so the body must fall freely under g = 9.81 m/s^2.
+    if model.opt.gravity[2] >= 0 or not 0.9 < drop_m / free_fall_m < 1.1:
+        raise ValueError(
+            f"body fell {drop_m:.4g} m in {t_s:g} s, expected about {free_fall_m:.4g} m "
+            f"(gravity {model.opt.gravity.tolist()})"
+        )
+    w, x, y, z = model.body_quat[body]
+    return _Reading(
+        mass=float(model.body_mass[body]),
+        com=np.array(model.body_ipos[body], dtype=float),
+        inertia=inertia,
+        friction=mu,
+        position=np.array(model.body_pos[body], dtype=float),
+        quaternion_xyzw=np.array([x, y, z, w], dtype=float),
+        notes=(f"stepped {_MJ_STEPS} steps ({t_s:g} s), fell {drop_m:.4g} m",),
+    )
+
+
+def _newton_reading(asset: Asset, builder, *, carries_friction: bool, carries_placement: bool) -> _Reading:
+    """Values from a Newton model finalized on the CPU: what its solvers actually see."""
+    import newton
+
+    model = builder.finalize(device="cpu")
+    labels = list(builder.body_label)
+    if model.body_count != 1:
+        raise ValueError(f"expected 1 body, Newton made {model.body_count}: {labels}")
+    body = 0
+    shape_body = model.shape_body.numpy()
+    flags = model.shape_flags.numpy()
+    colliding = [
+        s for s in range(model.shape_count)
+        if shape_body[s] == body and flags[s] & int(newton.ShapeFlags.COLLIDE_SHAPES)
+    ]  # fmt: skip
+    if len(colliding) != len(asset.geometry.collision):
+        raise ValueError(f"expected {len(asset.geometry.collision)} colliding shapes, found {len(colliding)}")
+    notes: list[str] = []
+    friction = None
+    mu_all = model.shape_material_mu.numpy()
+    if carries_friction:
+        friction = _collision_mu([float(mu_all[s]) for s in colliding], "Newton")
+    else:
+        notes.append(f"friction not carried; Newton uses its default mu = {float(mu_all[colliding[0]]):g}")
+    position = quaternion = None
+    if carries_placement:
+        q = model.body_q.numpy()[body].astype(float)
+        position, quaternion = q[:3], q[3:7]
+    else:
+        notes.append("placement not carried by the format; body at the origin")
+    return _Reading(
+        mass=float(model.body_mass.numpy()[body]),
+        com=model.body_com.numpy()[body].astype(float),
+        inertia=model.body_inertia.numpy()[body].astype(float),
+        friction=friction,
+        position=position,
+        quaternion_xyzw=quaternion,
+        notes=tuple(notes),
+    )
+
+
+def _read_newton_mjcf(asset: Asset, path: Path) -> _Reading:
+    import newton
+
+    builder = newton.ModelBuilder()
+    builder.add_mjcf(str(path))
+    return _newton_reading(asset, builder, carries_friction=True, carries_placement=True)
+
+
+# --- URDF ---------------------------------------------------------------------------------------
+
+
+def _read_yourdfpy(asset: Asset, path: Path) -> _Reading:
+    import yourdfpy
+
+    urdf = yourdfpy.URDF.load(
+        str(path), build_collision_scene_graph=True, load_collision_meshes=True, force_collision_mesh=False
+    )
+    if not urdf.validate():
+        raise ValueError("yourdfpy's validate() rejected the file")
+    link = urdf.link_map.get(asset.name)
+    if link is None or link.inertial is None:
+        raise ValueError(f"no link {asset.name!r} with <inertial>")
+    # yourdfpy skips missing meshes silently, so count what it loaded.
+    n_collision = len(urdf.collision_scene.geometry) if urdf.collision_scene is not None else 0
+    if n_collision != len(asset.geometry.collision):
+        raise ValueError(f"loaded {n_collision} collision meshes, expected {len(asset.geometry.collision)}")
+    if urdf.scene is None or len(urdf.scene.geometry) == 0:
+        raise ValueError("visual mesh did not load")
+    origin = np.asarray(link.inertial.origin, dtype=float)
+    R = origin[:3, :3]
+    return _Reading(
+        mass=float(link.inertial.mass),
+        com=origin[:3, 3].copy(),
+        inertia=R @ np.asarray(link.inertial.inertia, dtype=float) @ R.T,
+        notes=("friction not parsed by yourdfpy (<contact>/<gazebo> written)", "placement not carried by URDF"),
+    )
+
+
+def _read_newton_urdf(asset: Asset, path: Path) -> _Reading:
+    import newton
+
+    builder = newton.ModelBuilder()
+    builder.add_urdf(str(path), floating=True)
+    return _newton_reading(asset, builder, carries_friction=False, carries_placement=False)
+
+
+# --- USD ----------------------------------------------------------------------------------------
+
+
+_USD_VALIDATORS = (
+    "usdValidation:StageMetadataChecker",
+    "usdValidation:CompositionErrorTest",
+    "usdValidation:AttributeTypeMismatch",
+    "usdGeomValidators:StageMetadataChecker",
+    "usdPhysicsValidators:RigidBodyChecker",
+    "usdPhysicsValidators:ColliderChecker",
+    "usdShadeValidators:MaterialBindingApiAppliedValidator",
+    "usdShadeValidators:MaterialBindingRelationships",
+)
+"""usd-core's validators that apply to a rigid body (wheels ship no usdchecker)."""
+
+
+def _usd_validator_findings(stage) -> tuple[list[str], list[str]]:
+    """(errors, warnings) from usd-core's own validators."""
+    from pxr import UsdValidation
+
+    registry = UsdValidation.ValidationRegistry()
+    validators = [registry.GetOrLoadValidatorByName(n) for n in _USD_VALIDATORS if registry.HasValidator(n)]
+    errors, cautions = [], []
+    for finding in UsdValidation.ValidationContext(validators).Validate(stage):
+        text = f"{finding.GetName()}: {finding.GetMessage()}"
+        (errors if finding.GetType() == UsdValidation.ValidationErrorType.Error else cautions).append(text)
+    return errors, cautions
+
+
+def _read_usd_physics(asset: Asset, path: Path) -> _Reading:
+    from pxr import Usd, UsdGeom, UsdPhysics, UsdShade
+
+    stage = Usd.Stage.Open(str(path))
+    if stage is None:
+        raise ValueError("usd-core could not open the stage")
+    errors, cautions = _usd_validator_findings(stage)
+    if errors:
+        raise ValueError("usd-core validators: " + "; ".join(errors))
+    if UsdGeom.GetStageUpAxis(stage) != UsdGeom.Tokens.z:
+        raise ValueError(f"upAxis is {UsdGeom.GetStageUpAxis(stage)!r}, expected 'Z'")
+    if UsdGeom.GetStageMetersPerUnit(stage) != 1.0 or UsdPhysics.GetStageKilogramsPerUnit(stage) != 1.0:
+        raise ValueError("metersPerUnit and kilogramsPerUnit must be 1")
+    prim = stage.GetDefaultPrim()
+    if not prim or not prim.HasAPI(UsdPhysics.RigidBodyAPI) or not prim.HasAPI(UsdPhysics.MassAPI):
+        raise ValueError("default prim is missing or lacks RigidBodyAPI/MassAPI")
+    mass_api = UsdPhysics.MassAPI(prim)
+    mass = mass_api.GetMassAttr().Get()
+    com = mass_api.GetCenterOfMassAttr().Get()
+    diagonal = mass_api.GetDiagonalInertiaAttr().Get()
+    axes = mass_api.GetPrincipalAxesAttr().Get()
+    if mass is None or com is None or diagonal is None or axes is None:
+        raise ValueError("MassAPI needs mass, centerOfMass, diagonalInertia and principalAxes authored")
+    imaginary = axes.GetImaginary()
+    R = _rotation_from_wxyz((axes.GetReal(), *imaginary))
+    inertia = R @ np.diag(np.array(diagonal, dtype=float)) @ R.T
+
+    colliders = [p for p in Usd.PrimRange(prim) if p.HasAPI(UsdPhysics.CollisionAPI)]
+    if len(colliders) != len(asset.geometry.collision):
+        raise ValueError(f"found {len(colliders)} colliders, expected {len(asset.geometry.collision)}")
+    mus = []
+    for collider in colliders:
+        material, _ = UsdShade.MaterialBindingAPI(collider).ComputeBoundMaterial("physics")
+        if not material or not material.GetPrim().HasAPI(UsdPhysics.MaterialAPI):
+            raise ValueError(f"{collider.GetPath()} has no physics material bound")
+        mus.append(float(UsdPhysics.MaterialAPI(material.GetPrim()).GetDynamicFrictionAttr().Get()))
+    world = UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default())
+    q = world.ExtractRotationQuat()
+    qi = q.GetImaginary()
+    return _Reading(
+        mass=float(mass),
+        com=np.array(com, dtype=float),
+        inertia=inertia,
+        friction=_collision_mu(mus, "UsdPhysics"),
+        position=np.array(world.ExtractTranslation(), dtype=float),
+        quaternion_xyzw=np.array([qi[0], qi[1], qi[2], q.GetReal()], dtype=float),
+        notes=("inertia rebuilt from diagonalInertia and principalAxes (float32 by schema)", *cautions),
+    )
+
+
+def _read_newton_usd(asset: Asset, path: Path) -> _Reading:
+    import newton
+
+    builder = newton.ModelBuilder()
+    builder.add_usd(str(path))
+    return _newton_reading(asset, builder, carries_friction=True, carries_placement=True)
+
+
+Reader = Callable[[Asset, Path], _Reading]
+
+LOADERS: dict[str, tuple[tuple[str, Reader], ...]] = {
+    "mjcf": (("mujoco", _read_mujoco), ("newton.add_mjcf", _read_newton_mjcf)),
+    "urdf": (("yourdfpy", _read_yourdfpy), ("newton.add_urdf", _read_newton_urdf)),
+    "usd": (("pxr.UsdPhysics", _read_usd_physics), ("newton.add_usd", _read_newton_usd)),
+}
+"""Format key (as in asset.json → files) → (loader name, reader) pairs."""
+
+
+# --- comparison ---------------------------------------------------------------------------------
+
+
+def _object_size_m(asset: Asset, out_dir: Path) -> float:
+    """Bounding-box diagonal of the visual mesh [m]; gyration length if it cannot be read."""
+    import trimesh
+
+    try:
+        mesh = trimesh.load(out_dir / asset.geometry.visual, force="mesh", process=False)
+        size = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+        if math.isfinite(size) and size > 0:
+            return size
+    except Exception:  # fall back below; the loaders report unreadable meshes themselves
+        pass
+    inertial = asset.theta.inertial()
+    return float(math.sqrt(np.trace(inertial.inertia_matrix()) / inertial.mass))
+
+
+def _compare(asset: Asset, reading: _Reading, size_m: float) -> dict[str, float | None]:
+    from scipy.spatial.transform import Rotation
+
+    inertial = asset.theta.inertial()
+    I0 = inertial.inertia_matrix()
+    errors: dict[str, float | None] = {
+        "mass_error": abs(reading.mass - inertial.mass) / inertial.mass,
+        "com_error": float(np.linalg.norm(reading.com - np.array(inertial.com))) / max(size_m, _COM_FLOOR_M),
+        "inertia_error": float(np.linalg.norm(reading.inertia - I0) / np.linalg.norm(I0)),
+        "friction_error": None,
+        "placement_error": None,
+    }
+    if reading.friction is not None:
+        mu0 = float(asset.theta.friction.value)
+        errors["friction_error"] = abs(reading.friction - mu0) / max(abs(mu0), 1e-9)
+    if reading.position is not None and reading.quaternion_xyzw is not None:
+        p0 = np.array(asset.placement.position)
+        q0 = np.array(asset.placement.quaternion_xyzw)
+        # atan2-based magnitude: acos(|q . q0|) loses half the digits near identity.
+        angle = float((Rotation.from_quat(q0).inv() * Rotation.from_quat(reading.quaternion_xyzw)).magnitude())
+        scale = max(float(np.linalg.norm(p0)), size_m)
+        errors["placement_error"] = max(float(np.linalg.norm(reading.position - p0)) / scale, angle)
+    return errors
+
+
+def _check(asset: Asset, fmt: str, loader: str, reader: Reader, path: Path, size_m: float, tol: float) -> LoaderCheck:
+    # Loaders warn (e.g. Newton on a missing mesh) and carry on; keep what they said with the check.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            reading = reader(asset, path)
+        except Exception as exc:  # any loader failure is a finding, reported per loader
+            said = "".join(f"; {w.category.__name__}: {w.message}" for w in caught)
+            return LoaderCheck(
+                loader=loader, format=fmt, file=str(path), ok=False, error=f"{type(exc).__name__}: {exc}{said}"
+            )
+    said = tuple(f"{w.category.__name__}: {w.message}" for w in caught)
+    errors = _compare(asset, reading, size_m)
+    finite = [e for e in errors.values() if e is not None]
+    max_error = max(finite) if all(math.isfinite(e) for e in finite) else math.inf
+    return LoaderCheck(
+        loader=loader,
+        format=fmt,
+        file=str(path),
+        ok=max_error <= tol,
+        mass=reading.mass,
+        com=tuple(float(v) for v in reading.com),
+        inertia=tuple(tuple(float(v) for v in row) for row in reading.inertia),
+        friction=reading.friction,
+        position=None if reading.position is None else tuple(float(v) for v in reading.position),
+        quaternion_xyzw=None if reading.quaternion_xyzw is None else tuple(float(v) for v in reading.quaternion_xyzw),
+        max_error=max_error,
+        notes=reading.notes + said,
+        **errors,
+    )
+
+
+def _paths_from(paths: Any, out_dir: Path) -> dict[str, Path]:
+    """{"mjcf"|"urdf"|"usd": absolute path} from a mapping (asset.json files) or an object with attributes."""
+    found: dict[str, Path] = {}
+    for key in LOADERS:
+        value = paths.get(key) if isinstance(paths, Mapping) else getattr(paths, key, None)
+        if value is not None:
+            p = Path(value)
+            found[key] = p if p.is_absolute() else out_dir / p
+    return found
+
+
+def validate_exports(
+    asset: Asset, out_dir: Path, paths: Any, *, tolerance: float = DEFAULT_TOLERANCE, strict: bool = True
+) -> ValidationReport:
+    """Reload the exported files with every loader and compare with `asset.theta`.
+
+    Args:
+        asset: the asset the files were written from.
+        out_dir: the output directory (mesh paths and relative `paths` resolve here).
+        paths: the written files: a mapping with keys "urdf", "mjcf", "usd" (as
+            asset.json → files; other keys ignored) or an object with those
+            attributes (e.g. `exporters.ExportPaths`). Formats left out are not checked.
+        tolerance: largest accepted relative error (see the module docstring).
+        strict: raise on failure (default); with False, return the failing report.
+
+    Returns:
+        The report; `report.ok` is True when every loader agrees within `tolerance`.
+
+    Raises:
+        ValidationError: a loader failed to read a file or disagreed; `.report`
+            holds the full report.
+    """
+    out_dir = Path(out_dir)
+    files = _paths_from(paths, out_dir)
+    if not files:
+        raise ValidationError(out_dir, f"no exported files to validate (expected keys {tuple(LOADERS)})")
+    size_m = _object_size_m(asset, out_dir)
+    checks = []
+    for fmt, path in files.items():
+        if not path.is_file():
+            checks.append(LoaderCheck(loader="(file)", format=fmt, file=str(path), ok=False, error="file not found"))
+            continue
+        for loader, reader in LOADERS[fmt]:
+            checks.append(_check(asset, fmt, loader, reader, path, size_m, tolerance))
+    inertial = asset.theta.inertial()
+    report = ValidationReport(
+        ok=all(c.ok for c in checks),
+        tolerance=tolerance,
+        object_size_m=size_m,
+        checks=tuple(checks),
+        expected={
+            "mass": inertial.mass,
+            "com": inertial.com,
+            "inertia": inertial.inertia,
+            "friction": float(asset.theta.friction.value),
+            "position": asset.placement.position,
+            "quaternion_xyzw": asset.placement.quaternion_xyzw,
+        },
+    )
+    if strict and not report.ok:
+        bad = report.failures()
+        lines = [
+            f"{c.loader} ({c.format}): {c.error}" if c.error else f"{c.loader} ({c.format}): max relative error "
+            f"{c.max_error:.3g} > {tolerance:g} ({_worst(c)})"
+            for c in bad
+        ]
+        raise ValidationError(bad[0].file, "; ".join(lines), report)
+    return report
+
+
+def _worst(check: LoaderCheck) -> str:
+    names = ("mass_error", "com_error", "inertia_error", "friction_error", "placement_error")
+    values = {n: getattr(check, n) for n in names if getattr(check, n) is not None}
+    name = max(values, key=lambda n: values[n])
+    return f"{name.removesuffix('_error')} {values[name]:.3g}"
+
