@@ -1,0 +1,150 @@
+"""Warp kernels of free-body identification, each beside the launcher that runs it.
+
+One Newton world per shooting window; every world shares the ten inertial
+parameters theta and has its own initial-state correction. All kernels run on
+the tape so gradients reach theta and the corrections.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .inertia import inertial_from_theta
+
+
+@wp.kernel
+def assign_inertial_params(
+    theta: wp.array[float],
+    body_mass: wp.array[float],
+    body_inv_mass: wp.array[float],
+    body_com: wp.array[wp.vec3],
+    body_inertia: wp.array[wp.mat33],
+    body_inv_inertia: wp.array[wp.mat33],
+):
+    """Write mass [kg], COM [m, body frame] and inertia [kg m^2] from theta into every world's body.
+
+    SemiImplicit integrates with the inverses, so those must carry the gradient.
+    """
+    b = wp.tid()
+    m, com, inertia = inertial_from_theta(theta)
+    body_mass[b] = m
+    body_inv_mass[b] = 1.0 / m
+    body_com[b] = com
+    body_inertia[b] = inertia
+    body_inv_inertia[b] = wp.inverse(inertia)
+
+
+def assign_inertial_params_to_model(theta: wp.array, model) -> None:
+    wp.launch(
+        assign_inertial_params,
+        dim=model.body_count,
+        inputs=[theta],
+        outputs=[model.body_mass, model.body_inv_mass, model.body_com, model.body_inertia, model.body_inv_inertia],
+        device=model.device,
+    )
+
+
+@wp.kernel
+def set_window_start_state(
+    tracked_pose: wp.array[wp.transform],
+    tracked_twist: wp.array[wp.spatial_vector],
+    correction: wp.array[wp.spatial_vector],
+    correction_rate: wp.array[wp.spatial_vector],
+    X_tracked_body: wp.transform,
+    body_com: wp.array[wp.vec3],
+    body_q: wp.array[wp.transform],
+    body_qd: wp.array[wp.spatial_vector],
+):
+    """Start each window's body at the measured tracked-frame pose and twist plus a correction.
+
+    tracked_twist: (linear velocity of the tracked origin [m/s], angular velocity [rad/s]),
+    world axes. correction: (position [m], rotation vector [rad]); correction_rate:
+    (velocity [m/s], angular velocity [rad/s]). Newton's body_qd holds the COM's
+    velocity, which depends on the COM being estimated.
+    """
+    w = wp.tid()
+    X = tracked_pose[w]
+    dx = wp.spatial_top(correction[w])
+    dr = wp.spatial_bottom(correction[w])
+    # first-order exponential map: smooth at zero, where the gradient must not vanish
+    dq = wp.normalize(wp.quat(0.5 * dr[0], 0.5 * dr[1], 0.5 * dr[2], 1.0))
+    X = wp.transform(wp.transform_get_translation(X) + dx, dq * wp.transform_get_rotation(X))
+    Xb = X * X_tracked_body
+    body_q[w] = Xb
+    v = wp.spatial_top(tracked_twist[w]) + wp.spatial_top(correction_rate[w])
+    omega = wp.spatial_bottom(tracked_twist[w]) + wp.spatial_bottom(correction_rate[w])
+    r = wp.transform_point(Xb, body_com[w]) - wp.transform_get_translation(X)
+    body_qd[w] = wp.spatial_vector(v + wp.cross(omega, r), omega)
+
+
+@wp.kernel
+def apply_measured_wrench(
+    body_q: wp.array[wp.transform],
+    body_com: wp.array[wp.vec3],
+    X_body_tracked: wp.transform,
+    wrench: wp.array2d[wp.spatial_vector],
+    step: int,
+    body_f: wp.array[wp.spatial_vector],
+):
+    """Apply the measured wrench (force [N], torque [N m] about the tracked origin, world axes).
+
+    Newton wants torque about the COM; the moment arm uses the current COM
+    estimate so the gradient reaches it.
+    """
+    w = wp.tid()
+    X = body_q[w]
+    f = wp.spatial_top(wrench[step, w])
+    tau = wp.spatial_bottom(wrench[step, w])
+    arm = wp.transform_point(X, wp.transform_get_translation(X_body_tracked)) - wp.transform_point(X, body_com[w])
+    body_f[w] = wp.spatial_vector(f, tau + wp.cross(arm, f))
+
+
+@wp.kernel
+def eval_tracked_pose_error(
+    body_q: wp.array[wp.transform],
+    body_mass: wp.array[float],
+    body_inertia: wp.array[wp.mat33],
+    X_body_tracked: wp.transform,
+    measured: wp.array2d[wp.transform],
+    sample: int,
+    momentum_scaled: int,
+    residual: wp.array3d[float],
+):
+    """Tracked-frame error per window: position [m], then rotation vector [rad], world axes.
+
+    With momentum_scaled = 1 the position error is multiplied by the mass [kg m]
+    and the rotation error by the world-frame inertia [kg m^2 rad]. The measured
+    wrench drives the simulation, so its noise makes the simulated pose wander
+    by noise / mass (or / inertia); an unscaled loss is smallest when the mass
+    and inertia are too large, a bias that grows with the noise. Scaled, the
+    noise-driven part no longer depends on the parameters: in effect the loss
+    compares measured and predicted impulses, where the noise sits on the side
+    that does not bias a least-squares fit.
+    """
+    w = wp.tid()
+    X = body_q[w] * X_body_tracked
+    Xm = measured[sample, w]
+    dp = wp.transform_get_translation(X) - wp.transform_get_translation(Xm)
+    dq = wp.transform_get_rotation(X) * wp.quat_inverse(wp.transform_get_rotation(Xm))
+    # 2 vec(dq) is the rotation vector for small angles; the sign picks the short way round
+    s = wp.where(dq[3] < 0.0, -2.0, 2.0)
+    dr = wp.vec3(dq[0], dq[1], dq[2]) * s
+    if momentum_scaled != 0:
+        R = wp.quat_to_matrix(wp.transform_get_rotation(body_q[w]))
+        dp = body_mass[w] * dp
+        dr = R * body_inertia[w] * wp.transpose(R) * dr
+    for k in range(3):
+        residual[sample, w, k] = dp[k]
+        residual[sample, w, 3 + k] = dr[k]
+
+
+@wp.kernel
+def eval_weighted_squares(
+    residual: wp.array3d[float],
+    weight: wp.array2d[float],
+    loss: wp.array[float],
+):
+    """loss += sum of weight[j, k] * residual[j, w, k]^2 over sample j, window w, channel k."""
+    j, w, k = wp.tid()
+    r = residual[j, w, k]
+    wp.atomic_add(loss, 0, weight[j, k] * r * r)

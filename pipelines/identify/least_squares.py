@@ -1,0 +1,134 @@
+"""Least-squares inertial identification (Atkeson, An & Hollerbach 1986): the Newton-Euler regressor.
+
+The wrench at the tracked frame is linear in pi = (m, m c, I_o) once the
+frame's velocity and acceleration are known:
+
+    f = m (a - g) + alpha x (m c) + omega x (omega x (m c))
+    tau = I_o alpha + omega x (I_o omega) + (m c) x (a - g)
+
+all in tracked-frame axes, c the COM and I_o the inertia about the tracked
+origin. Accelerations come from the poses through a zero-phase low-pass
+filter; the wrench passes through the same filter so both sides are
+attenuated alike. The wrench noise stays on the measured side of the
+regression, which is why this estimator is not biased by it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from assets import Inertial, Pose
+
+from .windows import lowpass, smoothed_pose_grid
+
+GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
+
+
+@dataclass(frozen=True)
+class LeastSquaresResult:
+    """The estimate in the object frame and its covariance over (mass, com xyz, Ixx Iyy Izz Ixy Ixz Iyz)."""
+
+    inertial: Inertial
+    covariance: np.ndarray
+    cutoff_hz: float
+    sample_count: int
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """Batched cross-product matrices, [N, 3] -> [N, 3, 3]."""
+    z = np.zeros(len(v))
+    return np.stack(
+        [np.stack([z, -v[:, 2], v[:, 1]], -1), np.stack([v[:, 2], z, -v[:, 0]], -1),
+         np.stack([-v[:, 1], v[:, 0], z], -1)], 1
+    )
+
+
+def _inertia_operator(v: np.ndarray) -> np.ndarray:
+    """L(v) with I v = L(v) (Ixx, Iyy, Izz, Ixy, Ixz, Iyz), batched [N, 3, 6]."""
+    z = np.zeros(len(v))
+    x, y, w = v[:, 0], v[:, 1], v[:, 2]
+    return np.stack(
+        [np.stack([x, z, z, y, w, z], -1), np.stack([z, y, z, x, z, w], -1), np.stack([z, z, w, z, x, y], -1)], 1
+    )
+
+
+def identify_least_squares(
+    pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque,
+    X_tracked_body: Pose, *, cutoff_hz: float = 12.0, t_begin_s: float | None = None,
+    force_sigma_n: float = 1 / 80, torque_sigma_nm: float = 1 / 2000,
+) -> LeastSquaresResult:
+    """Fit pi by weighted least squares; wrench in world axes about the tracked origin."""
+    t, pos_f, rot_f = smoothed_pose_grid(pose_t_s, np.asarray(pose_position), np.asarray(pose_quat_xyzw), cutoff_hz)
+    dt = t[1] - t[0]
+    rate = 1.0 / dt
+    vel = np.gradient(pos_f, dt, axis=0)
+    acc = np.gradient(vel, dt, axis=0)
+    omega = (rot_f[2:] * rot_f[:-2].inv()).as_rotvec() / (2 * dt)  # world axes
+    omega = np.vstack([omega[:1], omega, omega[-1:]])
+    alpha = np.gradient(omega, dt, axis=0)
+
+    wt = np.asarray(wrench_t_s)
+    w_rate = 1.0 / np.median(np.diff(wt))
+    wrench = lowpass(np.hstack([wrench_force, wrench_torque]), cutoff_hz, w_rate)
+    wrench = np.stack([np.interp(t, wt, wrench[:, k]) for k in range(6)], 1)
+
+    keep = (t >= max(t[0], wt[0]) + 0.1) & (t <= min(t[-1], wt[-1]) - 0.1)
+    if t_begin_s is not None:
+        keep &= t >= t_begin_s
+    R_inv = rot_f[keep].inv()
+    a_g = R_inv.apply(acc[keep] - GRAVITY_M_S2)
+    w_b = R_inv.apply(omega[keep])
+    al_b = R_inv.apply(alpha[keep])
+    f_b = R_inv.apply(wrench[keep, :3])
+    tau_b = R_inv.apply(wrench[keep, 3:])
+    n = int(keep.sum())
+
+    A = np.zeros((n, 6, 10))
+    A[:, :3, 0] = a_g
+    Sw = _skew(w_b)
+    A[:, :3, 1:4] = _skew(al_b) + Sw @ Sw
+    A[:, 3:, 1:4] = -_skew(a_g)
+    A[:, 3:, 4:] = _inertia_operator(al_b) + Sw @ _inertia_operator(w_b)
+    b = np.concatenate([f_b, tau_b], axis=1)
+    scale = np.array([1 / force_sigma_n] * 3 + [1 / torque_sigma_nm] * 3)
+    As = (A * scale[None, :, None]).reshape(-1, 10)
+    bs = (b * scale).reshape(-1)
+    pi, *_ = np.linalg.lstsq(As, bs, rcond=None)
+    res = bs - As @ pi
+    # filtered noise is correlated over ~1/(2 cutoff): count independent samples accordingly
+    dof = max(len(bs) * min(1.0, 2 * cutoff_hz / rate) - 10, 1)
+    sigma2 = float(res @ res) / dof
+    cov_pi = sigma2 * np.linalg.pinv(As.T @ As) * (len(bs) / max(len(bs) * min(1.0, 2 * cutoff_hz / rate), 1))
+
+    inertial, J = _object_frame(pi, X_tracked_body)
+    return LeastSquaresResult(inertial, J @ cov_pi @ J.T, cutoff_hz, n)
+
+
+def _object_frame(pi: np.ndarray, X_tracked_body: Pose) -> tuple[Inertial, np.ndarray]:
+    """Convert pi (tracked frame, about its origin) to an object-frame Inertial, with the Jacobian."""
+
+    def convert(p):
+        m = p[0]
+        c = p[1:4] / m
+        Ixx, Iyy, Izz, Ixy, Ixz, Iyz = p[4:]
+        I_o = np.array([[Ixx, Ixy, Ixz], [Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]])
+        I_c = I_o - m * (c @ c * np.eye(3) - np.outer(c, c))
+        T_bt = np.linalg.inv(X_tracked_body.matrix())  # tracked frame in body frame
+        c_obj = T_bt[:3, :3] @ c + T_bt[:3, 3]
+        I_obj = T_bt[:3, :3] @ I_c @ T_bt[:3, :3].T
+        return m, c_obj, I_obj
+
+    def flat(p):
+        m, c, I = convert(p)
+        return np.array([m, *c, I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
+
+    J = np.zeros((10, 10))
+    for k in range(10):
+        e = np.zeros(10)
+        e[k] = 1e-6 * max(abs(pi[k]), 1e-9)
+        J[:, k] = (flat(pi + e) - flat(pi - e)) / (2 * e[k])
+    m, c, I = convert(pi)
+    return Inertial(max(m, 1e-12), c, I), J

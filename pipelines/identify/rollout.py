@@ -1,0 +1,144 @@
+"""Shooting windows simulated as parallel Newton worlds, with loss and gradient from a Warp tape."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from assets import Pose
+
+from .inertia import THETA_SIZE
+from .kernels import (
+    apply_measured_wrench,
+    assign_inertial_params_to_model,
+    eval_tracked_pose_error,
+    eval_weighted_squares,
+    set_window_start_state,
+)
+from .windows import ShootingWindows
+
+GRAVITY_M_S2 = (0.0, 0.0, -9.81)
+
+
+class FreeBodyRollout:
+    """One free body per window, SemiImplicit, no damping; parameters written on the tape.
+
+    X_tracked_body: the object (body) frame in the tracked frame.
+    """
+
+    def __init__(self, windows: ShootingWindows, X_tracked_body: Pose, device: str = "cpu"):
+        import newton
+        import warp as wp
+
+        self.windows = windows
+        self.device = device
+        W = windows.window_count
+        sub = newton.ModelBuilder(gravity=GRAVITY_M_S2)
+        sub.add_body(mass=1.0, inertia=wp.mat33(np.eye(3) * 1e-3), lock_inertia=True)
+        builder = newton.ModelBuilder(gravity=GRAVITY_M_S2)
+        builder.replicate(sub, W)
+        self.model = builder.finalize(device=device, requires_grad=True)
+        self.solver = newton.solvers.SolverSemiImplicit(self.model, angular_damping=0.0)
+        self.control = self.model.control()
+        self.states = [self.model.state(requires_grad=True) for _ in range(windows.step_count + 1)]
+
+        X_tb = wp.transform(wp.vec3(*X_tracked_body.position), wp.quat(*X_tracked_body.quaternion_xyzw))
+        self.X_tracked_body = X_tb
+        self.X_body_tracked = wp.transform_inverse(X_tb)
+
+        m = windows.measured_position
+        q = windows.measured_quat_xyzw
+        measured = np.concatenate([m, q], axis=-1).astype(np.float32)
+        self.measured = wp.array(measured, dtype=wp.transform, device=device)
+        self.start_pose = wp.array(measured[0], dtype=wp.transform, device=device)
+        self.start_twist = wp.array(windows.start_twist.astype(np.float32), dtype=wp.spatial_vector, device=device)
+        self.wrench = wp.array(windows.wrench.astype(np.float32), dtype=wp.spatial_vector, device=device)
+
+        self.theta = wp.zeros(THETA_SIZE, dtype=float, device=device, requires_grad=True)
+        self.correction = wp.zeros(W, dtype=wp.spatial_vector, device=device, requires_grad=True)
+        self.correction_rate = wp.zeros(W, dtype=wp.spatial_vector, device=device, requires_grad=True)
+        self.residual = wp.zeros((windows.sample_count + 1, W, 6), dtype=float, device=device, requires_grad=True)
+        self.weight = wp.zeros((windows.sample_count + 1, 6), dtype=float, device=device)
+        self.loss = wp.zeros(1, dtype=float, device=device, requires_grad=True)
+
+    def _load(self, theta: np.ndarray, correction: np.ndarray | None, correction_rate: np.ndarray | None):
+        W = self.windows.window_count
+        self.theta.assign(np.asarray(theta, dtype=np.float32))
+        self.correction.assign(np.zeros((W, 6), np.float32) if correction is None else correction.astype(np.float32))
+        self.correction_rate.assign(
+            np.zeros((W, 6), np.float32) if correction_rate is None else correction_rate.astype(np.float32)
+        )
+
+    def _forward(self, momentum_scaled: bool) -> None:
+        import warp as wp
+
+        w = self.windows
+        model = self.model
+        assign_inertial_params_to_model(self.theta, model)
+        s0 = self.states[0]
+        wp.launch(
+            set_window_start_state,
+            dim=w.window_count,
+            inputs=[self.start_pose, self.start_twist, self.correction, self.correction_rate, self.X_tracked_body,
+                    model.body_com],
+            outputs=[s0.body_q, s0.body_qd],
+            device=self.device,
+        )
+        self.residual.zero_()
+        for step in range(w.step_count):
+            s, s_next = self.states[step], self.states[step + 1]
+            wp.launch(
+                apply_measured_wrench,
+                dim=w.window_count,
+                inputs=[s.body_q, model.body_com, self.X_body_tracked, self.wrench, step],
+                outputs=[s.body_f],
+                device=self.device,
+            )
+            self.solver.step(s, s_next, self.control, None, w.dt_s)
+            if (step + 1) % w.substeps == 0:
+                sample = (step + 1) // w.substeps
+                wp.launch(
+                    eval_tracked_pose_error,
+                    dim=w.window_count,
+                    inputs=[s_next.body_q, model.body_mass, model.body_inertia, self.X_body_tracked, self.measured,
+                            sample, int(momentum_scaled)],
+                    outputs=[self.residual],
+                    device=self.device,
+                )
+
+    def residuals(self, theta, correction=None, correction_rate=None, momentum_scaled=True) -> np.ndarray:
+        """Tracked-frame errors [S, W, 6] for samples 1..S: see `eval_tracked_pose_error`."""
+        self._load(theta, correction, correction_rate)
+        self._forward(momentum_scaled)
+        return self.residual.numpy()[1:].astype(float)
+
+    def loss_and_grad(
+        self, theta, correction, correction_rate, weight: np.ndarray, momentum_scaled: bool
+    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """Weighted sum of squared pose errors and its gradients w.r.t. theta and the corrections.
+
+        weight [S, 6]: per sample index within the window and channel.
+        """
+        import warp as wp
+
+        self._load(theta, correction, correction_rate)
+        self.weight.assign(np.vstack([np.zeros((1, 6)), weight]).astype(np.float32))
+        tape = wp.Tape()
+        with tape:
+            self._forward(momentum_scaled)
+            self.loss.zero_()
+            wp.launch(
+                eval_weighted_squares,
+                dim=self.residual.shape,
+                inputs=[self.residual, self.weight],
+                outputs=[self.loss],
+                device=self.device,
+            )
+        tape.backward(self.loss)
+        out = (
+            float(self.loss.numpy()[0]),
+            self.theta.grad.numpy().astype(float).copy(),
+            self.correction.grad.numpy().astype(float).copy(),
+            self.correction_rate.grad.numpy().astype(float).copy(),
+        )
+        tape.zero()
+        return out

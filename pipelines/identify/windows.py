@@ -1,0 +1,142 @@
+"""Multiple-shooting windows cut from a recording, each started from the measured state."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+
+@dataclass(frozen=True)
+class ShootingWindows:
+    """Simulation inputs and targets for W windows of `sample_count` pose samples each.
+
+    dt_s: simulation step [s]; substeps: steps per pose sample; t_start_s [W];
+    wrench [steps, W, 6]: force [N] and torque about the tracked origin [N m], world
+    axes, zero-order hold of the sensor samples; measured_position [S+1, W, 3] [m]
+    and measured_quat_xyzw [S+1, W, 4]: the tracked frame, sample 0 the start;
+    start_twist [W, 6]: tracked-origin velocity [m/s] and angular velocity [rad/s]
+    at the start, estimated from the poses.
+    """
+
+    dt_s: float
+    substeps: int
+    t_start_s: np.ndarray
+    wrench: np.ndarray
+    measured_position: np.ndarray
+    measured_quat_xyzw: np.ndarray
+    start_twist: np.ndarray
+
+    @property
+    def window_count(self) -> int:
+        return len(self.t_start_s)
+
+    @property
+    def sample_count(self) -> int:
+        return self.measured_position.shape[0] - 1
+
+    @property
+    def step_count(self) -> int:
+        return self.wrench.shape[0]
+
+    @property
+    def window_s(self) -> float:
+        return self.step_count * self.dt_s
+
+
+def uniform_pose_grid(t_s, position, quat_xyzw) -> tuple[np.ndarray, np.ndarray, Rotation]:
+    """Poses resampled onto a uniform grid at the median sampling period."""
+    t_s = np.asarray(t_s, dtype=float)
+    period = float(np.median(np.diff(t_s)))
+    grid = t_s[0] + period * np.arange(int(np.floor((t_s[-1] - t_s[0]) / period + 1e-6)) + 1)
+    pos = np.stack([np.interp(grid, t_s, position[:, k]) for k in range(3)], axis=1)
+    rot = Slerp(t_s, Rotation.from_quat(quat_xyzw))(grid)
+    return grid, pos, rot
+
+
+def lowpass(x: np.ndarray, cutoff_hz: float, rate_hz: float) -> np.ndarray:
+    """Zero-phase 4th-order Butterworth low-pass along axis 0 (no delay)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    sos = butter(4, cutoff_hz / (0.5 * rate_hz), output="sos")
+    return sosfiltfilt(sos, x, axis=0)
+
+
+def smoothed_pose_grid(t_s, position, quat_xyzw, cutoff_hz: float) -> tuple[np.ndarray, np.ndarray, Rotation]:
+    """Uniform pose grid, low-passed: positions directly, rotations as sign-continuous quaternions."""
+    t, pos, rot = uniform_pose_grid(t_s, position, quat_xyzw)
+    rate = 1.0 / (t[1] - t[0])
+    q = rot.as_quat()
+    for i in range(1, len(q)):  # one hemisphere, so the components can be filtered
+        if q[i] @ q[i - 1] < 0:
+            q[i] = -q[i]
+    return t, lowpass(pos, cutoff_hz, rate), Rotation.from_quat(lowpass(q, cutoff_hz, rate))
+
+
+def local_twist(grid_t, pos, rot: Rotation, index: int, half_width: int) -> np.ndarray:
+    """Velocity [m/s] and angular velocity [rad/s, world] at `index` from a local quadratic fit."""
+    lo, hi = max(0, index - half_width), min(len(grid_t), index + half_width + 1)
+    tau = grid_t[lo:hi] - grid_t[index]
+    A = np.stack([np.ones_like(tau), tau, tau * tau], axis=1)
+    rotvec = (rot[lo:hi] * rot[index].inv()).as_rotvec()  # world-axes increments
+    coef_p, *_ = np.linalg.lstsq(A, pos[lo:hi], rcond=None)
+    coef_r, *_ = np.linalg.lstsq(A, rotvec, rcond=None)
+    return np.concatenate([coef_p[1], coef_r[1]])
+
+
+def make_windows(
+    pose_t_s,
+    pose_position,
+    pose_quat_xyzw,
+    wrench_t_s,
+    wrench_force,
+    wrench_torque,
+    *,
+    window_s: float,
+    substeps: int,
+    t_begin_s: float | None = None,
+    t_end_s: float | None = None,
+    twist_half_width: int = 5,
+    smoothing_hz: float | None = None,
+) -> ShootingWindows:
+    """Cut back-to-back windows of `window_s` over [t_begin_s, t_end_s] (default: all of it).
+
+    With `smoothing_hz`, poses and wrench are both low-passed (zero phase) at that cutoff
+    first: start states and targets come from the smoothed motion.
+    """
+    if smoothing_hz:
+        grid, pos, rot = smoothed_pose_grid(pose_t_s, np.asarray(pose_position), np.asarray(pose_quat_xyzw), smoothing_hz)
+        w_rate = 1.0 / np.median(np.diff(wrench_t_s))
+        wrench_force = lowpass(np.asarray(wrench_force), smoothing_hz, w_rate)
+        wrench_torque = lowpass(np.asarray(wrench_torque), smoothing_hz, w_rate)
+    else:
+        grid, pos, rot = uniform_pose_grid(pose_t_s, np.asarray(pose_position), np.asarray(pose_quat_xyzw))
+    period = grid[1] - grid[0]
+    samples = max(1, int(round(window_s / period)))
+    t_begin = max(grid[0], wrench_t_s[0]) if t_begin_s is None else t_begin_s
+    t_end = min(grid[-1], wrench_t_s[-1]) if t_end_s is None else t_end_s
+    first = int(np.searchsorted(grid, t_begin - 1e-9))
+    starts = np.arange(first, len(grid) - samples, samples)
+    starts = starts[grid[starts + samples] <= t_end + 1e-9]
+    if len(starts) == 0:
+        raise ValueError(f"recording too short for one {window_s} s window between {t_begin:.3f} and {t_end:.3f} s")
+
+    dt = period / substeps
+    steps = samples * substeps
+    t_step = grid[starts][None, :] + dt * np.arange(steps)[:, None]  # [steps, W]
+    # zero-order hold: the latest sensor sample at or before each step
+    idx = np.clip(np.searchsorted(wrench_t_s, t_step + 1e-9, side="right") - 1, 0, len(wrench_t_s) - 1)
+    wrench = np.concatenate([np.asarray(wrench_force)[idx], np.asarray(wrench_torque)[idx]], axis=-1)
+
+    sample_idx = starts[None, :] + np.arange(samples + 1)[:, None]  # [S+1, W]
+    twist = np.stack([local_twist(grid, pos, rot, i, twist_half_width) for i in starts])
+    return ShootingWindows(
+        dt_s=dt,
+        substeps=substeps,
+        t_start_s=grid[starts],
+        wrench=wrench,
+        measured_position=pos[sample_idx],
+        measured_quat_xyzw=rot[sample_idx.reshape(-1)].as_quat().reshape(samples + 1, len(starts), 4),
+        start_twist=twist,
+    )
