@@ -1,0 +1,690 @@
+"""Reconstruct a watertight mesh of the scanned object, in the world frame where it was scanned.
+
+Method (each step a private function below):
+
+1. Segment. Back-project the depth images (subsampled) into world points. With
+   masks, the object is the masked points and the support plane is fitted by
+   RANSAC to the rest; without, the dominant plane is found by RANSAC, the
+   points above it are clustered with DBSCAN and the cluster nearest the image
+   centres is the object. The plane is refined by least squares on its inliers.
+2. Fuse. Open3D's TSDF (`VoxelBlockGrid`) integrates every frame's full depth
+   (object and table) into all voxel blocks of a box around the object, so
+   each voxel seen in front of a surface, or within the truncation band behind
+   it, gets a truncated signed distance. Voxels never seen that way are either
+   hidden behind surfaces (the object's interior, its unseen underside) or
+   never observed; a projection pass counts, for each, the views in which it
+   lies behind the measured surface: those are solid, the rest empty.
+3. Close. The field is intersected with the half-space a few voxels above the
+   support plane, so the table drops away and the object's footprint is closed
+   by a flat cap; marching cubes on this closed field gives closed surfaces.
+   The cap is then lowered onto the plane (the slab below the cut is the
+   vertical extrusion of the cut's cross-section), and the largest component kept.
+4. Clean. Taubin smoothing, quadric decimation to `target_faces`, outward
+   normals, and a check that the result is watertight and a positive volume.
+
+Optionally (`pose_refine_rounds`), camera poses are first corrected by
+frame-to-model ICP against the fused surface.
+
+On a rendered 4 cm cube (24 views of 640x480 at 0.35-0.5 m, 0.7 mm depth noise,
+1 mm quantisation) the volume is within 0.4 % and the centre of mass within
+0.05 mm of the truth; the TSDF costs about 30-40 ms per frame on two CPU cores.
+
+Depth is z-depth with pixel centres at (u + 0.5, v + 0.5) (see `pipelines.scan`),
+which is also how Open3D's `VoxelBlockGrid.integrate` projects (floor of the
+projected coordinate).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import trimesh
+
+from .scan import Frame, Intrinsics, Scan
+
+__all__ = ["ReconstructConfig", "ReconstructError", "Reconstruction", "reconstruct"]
+
+_BLOCK = 8  # voxels per VoxelBlockGrid block side
+
+
+class ReconstructError(RuntimeError):
+    """The scan could not be turned into a watertight object mesh; the message says why and what to try."""
+
+
+@dataclass(frozen=True)
+class ReconstructConfig:
+    """Segmentation, TSDF fusion and cleanup settings; `None` means chosen from the data."""
+
+    voxel_size_m: float | None = None
+    """TSDF voxel edge [m]. None: the object's extent / `voxels_per_extent`, clamped to `voxel_size_range_m`."""
+    voxels_per_extent: float = 80.0
+    """Voxels across the object's largest extent when `voxel_size_m` is None, 20-300."""
+    voxel_size_range_m: tuple[float, float] = (0.0005, 0.005)
+    """Clamp for the automatic voxel size [m]."""
+    sdf_trunc_voxels: float = 5.0
+    """TSDF truncation distance [voxels], 3-10; should exceed ~3 depth-noise sigmas."""
+    depth_trunc_m: float = 3.0
+    """Depth beyond this is ignored [m]."""
+    use_masks: bool = True
+    """Segment with the scan's masks when every frame has one; else by plane and clustering."""
+    segmentation_stride: int = 4
+    """Pixel stride of the back-projection used for segmentation and plane fitting, 1-16."""
+    plane_distance_m: float | None = None
+    """RANSAC inlier distance for the support plane [m]. None: max(2 mm, 0.5 % of the median depth)."""
+    plane_ransac_iterations: int = 2000
+    """RANSAC iterations for the support plane."""
+    object_min_height_m: float | None = None
+    """Without masks: points this far above the plane are object candidates [m]. None: 2 x plane_distance_m."""
+    cluster_eps_m: float | None = None
+    """DBSCAN neighbourhood radius [m]. None: 3 x the back-projected pixel footprint x stride."""
+    cluster_min_points: int = 10
+    """DBSCAN minimum cluster size [points]."""
+    pose_refine_rounds: int = 0
+    """Rounds of frame-to-model point-to-plane ICP that correct the camera poses before the final
+    fusion, 0-5; 0 trusts the poses as given. The mean correction is removed, so the object stays
+    where the input poses put it. Worth it when poses are off by more than ~1 mm at the object
+    (it halved the volume loss of a 4 cm cube under 1 mm / 0.3 deg pose noise, -12 % to -6 %);
+    with accurate poses it costs ~0.5 % of volume, as frames settle onto the slightly eroded model."""
+    pose_refine_max_distance_m: float | None = None
+    """ICP correspondence distance [m]; should exceed the pose error at the object. None: 8 voxels."""
+    region_margin: float = 0.15
+    """Margin around the segmented object for the fusion box, as a fraction of its extent (plus the truncation)."""
+    cut_height_voxels: float = 3.0
+    """Height above the support plane where the table is cut away [voxels]; the slab below is extruded."""
+    smoothing_iterations: int = 10
+    """Taubin smoothing steps (lambda 0.5, mu -0.53; volume-preserving) on the marching-cubes mesh, 0-50.
+    On the 4 cm test cube, 10 steps cut the mean surface error from 0.10 to 0.08 mm."""
+    max_voxels: int = 40_000_000
+    """Refuse fusion boxes with more voxels than this (memory: ~20 bytes per voxel)."""
+    target_faces: int = 20000
+    """Face count after quadric decimation; 0 keeps the marching-cubes mesh."""
+    seed: int = 0
+    """Seed of Open3D's RANSAC, so reruns give identical meshes."""
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """The reconstructed object.
+
+    mesh: trimesh.Trimesh, world frame [m], watertight, outward normals, resting
+      on the support plane at the scanned placement.
+    support_plane: (normal [3], offset [m]) with normal . x + offset = 0 on the
+      plane, normal pointing up (towards the cameras), world frame.
+    object_points_count: back-projected points segmented as the object.
+    voxel_size_m: TSDF voxel edge used [m].
+    stats: timings [s], counts and intermediate values, JSON-serialisable.
+    """
+
+    mesh: "trimesh.Trimesh"
+    support_plane: tuple[np.ndarray, float]
+    object_points_count: int
+    voxel_size_m: float
+    stats: dict = field(default_factory=dict)
+
+
+def reconstruct(scan: Scan, config: ReconstructConfig = ReconstructConfig()) -> Reconstruction:
+    """Segment, fuse and close the scanned object into a watertight mesh in the world frame.
+
+    Args:
+        scan: from `pipelines.scan.read_scan`.
+        config: see `ReconstructConfig`.
+
+    Returns:
+        The mesh, support plane and statistics.
+
+    Raises:
+        ReconstructError: if no object or plane is found, or the mesh cannot be made watertight.
+    """
+    import open3d as o3d
+
+    o3d.utility.random.seed(config.seed)
+    stats: dict = {"frame_count": len(scan.frames)}
+    t0 = time.perf_counter()
+    views = [_View.of(frame) for frame in scan.frames]
+
+    segmentation = _segment(views, config, scan)
+    normal, offset = segmentation.plane
+    stats.update(segmentation.stats)
+    stats["segment_s"] = time.perf_counter() - t0
+
+    extent = segmentation.extent_m
+    if config.voxel_size_m is not None:
+        voxel = float(config.voxel_size_m)
+    else:
+        voxel = float(np.clip(extent / config.voxels_per_extent, *config.voxel_size_range_m))
+    trunc_m = config.sdf_trunc_voxels * voxel
+    margin = config.region_margin * extent + trunc_m + 3 * voxel
+    lo = segmentation.lo - margin
+    hi = segmentation.hi + margin
+
+    voxel_count = float(np.prod(np.ceil((hi - lo) / voxel)))
+    if voxel_count > config.max_voxels:
+        raise ReconstructError(
+            f"{scan.root}: the object's box ({np.round(hi - lo, 3).tolist()} m) needs {voxel_count:.3g} voxels of "
+            f"{voxel * 1000:.2f} mm, more than max_voxels={config.max_voxels}; was the object segmented "
+            "(give masks), or set a larger voxel_size_m"
+        )
+    t1 = time.perf_counter()
+    grid = _fuse(views, lo, hi, voxel, config)
+    stats["tsdf_s_per_frame"] = (time.perf_counter() - t1) / len(views)
+    stats["voxel_count"] = int(grid.tsdf.size)
+    if config.pose_refine_rounds > 0:
+        t_icp = time.perf_counter()
+        max_distance = config.pose_refine_max_distance_m or 8.0 * voxel
+        centre = 0.5 * (segmentation.lo + segmentation.hi)
+        corrections = []
+        for _ in range(config.pose_refine_rounds):
+            views, moved = _refine_poses(views, grid, lo, hi, centre, max_distance, config)
+            corrections.append(moved)
+            grid = _fuse(views, lo, hi, voxel, config)
+        stats["pose_refine_s"] = time.perf_counter() - t_icp
+        stats["pose_correction_m"] = corrections  # per round: the largest shift of the object's centre
+
+    t2 = time.perf_counter()
+    cut_m = config.cut_height_voxels * voxel
+    _close_field(grid, views, normal, offset, cut_m, trunc_m, config.depth_trunc_m)
+    stats["close_s"] = time.perf_counter() - t2
+
+    t3 = time.perf_counter()
+    mesh = _extract(grid)
+    stats["faces_extracted"] = int(len(mesh.faces))
+    mesh = _largest_volume(mesh, scan)
+    _lower_cap(mesh, normal, offset, cut_m + 1e-3 * voxel)
+    _smooth(mesh, normal, offset, config.smoothing_iterations)
+    mesh = _simplify(mesh, config.target_faces, scan)
+    stats["extract_s"] = time.perf_counter() - t3
+    stats.update(
+        faces=int(len(mesh.faces)),
+        volume_m3=float(mesh.volume),
+        voxel_size_m=voxel,
+        sdf_trunc_m=trunc_m,
+        cut_height_m=cut_m,
+        region_lo_m=lo.tolist(),
+        region_hi_m=hi.tolist(),
+        total_s=time.perf_counter() - t0,
+    )
+    return Reconstruction(
+        mesh=mesh,
+        support_plane=(normal, float(offset)),
+        object_points_count=int(len(segmentation.object_points)),
+        voxel_size_m=voxel,
+        stats=stats,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# views
+
+
+@dataclass(frozen=True, eq=False)
+class _View:
+    """A frame with depth (and mask) resampled to an undistorted pinhole camera."""
+
+    depth_m: np.ndarray
+    mask: np.ndarray | None
+    intrinsics: Intrinsics
+    T_world_camera: np.ndarray
+
+    @staticmethod
+    def of(frame: Frame) -> "_View":
+        intr = frame.intrinsics
+        depth, mask = frame.depth_m, frame.mask
+        if intr.has_distortion:
+            rows, cols = _undistort_lookup(intr)
+            depth = depth[rows, cols]
+            mask = None if mask is None else mask[rows, cols]
+        return _View(depth.astype(np.float32, copy=False), mask, intr, np.asarray(frame.T_world_camera, float))
+
+    @property
+    def K(self) -> np.ndarray:
+        return self.intrinsics.matrix()
+
+    def centre(self) -> np.ndarray:
+        return self.T_world_camera[:3, 3]
+
+
+def _undistort_lookup(intr: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """For each pixel of the ideal pinhole image, the distorted image's pixel it shows (nearest)."""
+    u, v = np.meshgrid(np.arange(intr.width) + 0.5, np.arange(intr.height) + 0.5)
+    x, y = (u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy
+    r2 = x * x + y * y
+    radial = 1 + intr.k1 * r2 + intr.k2 * r2 * r2
+    xd = x * radial + 2 * intr.p1 * x * y + intr.p2 * (r2 + 2 * x * x)
+    yd = y * radial + intr.p1 * (r2 + 2 * y * y) + 2 * intr.p2 * x * y
+    cols = np.clip(np.floor(xd * intr.fx + intr.cx), 0, intr.width - 1).astype(np.intp)
+    rows = np.clip(np.floor(yd * intr.fy + intr.cy), 0, intr.height - 1).astype(np.intp)
+    return rows, cols
+
+
+def _backproject(view: _View, stride: int, max_depth_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """World points [m] of every `stride`-th pixel with valid depth, and their mask flags."""
+    intr = view.intrinsics
+    s = max(1, int(stride))
+    rows = np.arange(s // 2, intr.height, s)
+    cols = np.arange(s // 2, intr.width, s)
+    z = view.depth_m[np.ix_(rows, cols)].astype(np.float64)
+    u, v = np.meshgrid(cols + 0.5, rows + 0.5)
+    ok = (z > 0) & (z <= max_depth_m)
+    z, u, v = z[ok], u[ok], v[ok]
+    p = np.stack([(u - intr.cx) / intr.fx * z, (v - intr.cy) / intr.fy * z, z], axis=1)
+    T = view.T_world_camera
+    points = p @ T[:3, :3].T + T[:3, 3]
+    flags = view.mask[np.ix_(rows, cols)][ok] if view.mask is not None else np.zeros(len(points), bool)
+    return points, flags
+
+
+# ---------------------------------------------------------------------------------------------
+# segmentation
+
+
+@dataclass(frozen=True, eq=False)
+class _Segmentation:
+    plane: tuple[np.ndarray, float]
+    object_points: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    extent_m: float
+    stats: dict
+
+
+def _segment(views: list[_View], config: ReconstructConfig, scan: Scan) -> _Segmentation:
+    import open3d as o3d
+
+    clouds = [_backproject(v, config.segmentation_stride, config.depth_trunc_m) for v in views]
+    points = np.concatenate([c[0] for c in clouds])
+    flags = np.concatenate([c[1] for c in clouds])
+    if len(points) < 100:
+        raise ReconstructError(f"{scan.root}: too few valid depth pixels ({len(points)}) to reconstruct")
+    depths = np.concatenate([v.depth_m[v.depth_m > 0][::53] for v in views])
+    median_depth = float(np.median(depths))
+    focal = float(np.mean([v.intrinsics.fx for v in views]))
+    footprint = median_depth / focal * max(1, config.segmentation_stride)
+    plane_thr = config.plane_distance_m or max(0.002, 0.005 * median_depth)
+    min_height = config.object_min_height_m or 2.0 * plane_thr
+    eps = config.cluster_eps_m or 3.0 * footprint
+    cameras = np.array([v.centre() for v in views])
+
+    use_masks = config.use_masks and all(v.mask is not None for v in views)
+    if use_masks:
+        if not flags.any():
+            raise ReconstructError(f"{scan.root}: the masks mark no pixel with valid depth as the object")
+        background = points[~flags]
+        if len(background) < 100:
+            raise ReconstructError(f"{scan.root}: too few unmasked points to fit the support plane")
+        normal, offset, rms = _fit_plane(background, plane_thr, footprint, cameras, config)
+        candidates = points[flags]
+        method = "masks"
+    else:
+        normal, offset, rms = _fit_plane(points, plane_thr, footprint, cameras, config)
+        candidates = points[points @ normal + offset > min_height]
+        method = "plane+dbscan"
+    if len(candidates) < config.cluster_min_points:
+        raise ReconstructError(
+            f"{scan.root}: no object found above the support plane ({len(candidates)} candidate points); "
+            "give masks or lower object_min_height_m"
+        )
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(candidates)).voxel_down_sample(footprint)
+    sample = np.asarray(pcd.points)
+    labels = np.asarray(pcd.cluster_dbscan(eps=eps, min_points=config.cluster_min_points))
+    chosen = _choose_cluster(sample, labels, views, use_masks)
+    if chosen is None:
+        raise ReconstructError(f"{scan.root}: DBSCAN found no object cluster (eps {eps:.4g} m); set cluster_eps_m")
+    obj = sample[labels == chosen]
+    footprint_pts = obj - np.outer(obj @ normal + offset, normal)  # the object's shadow on the plane
+    both = np.concatenate([obj, footprint_pts])
+    lo, hi = both.min(axis=0), both.max(axis=0)
+    extent = float((hi - lo).max())
+    stats = {
+        "segmentation": method,
+        "plane_rms_m": rms,
+        "plane_distance_m": plane_thr,
+        "median_depth_m": median_depth,
+        "cluster_count": int(labels.max() + 1),
+        "object_extent_m": extent,
+    }
+    return _Segmentation((normal, offset), obj, lo, hi, extent, stats)
+
+
+def _fit_plane(
+    points: np.ndarray, threshold: float, footprint: float, cameras: np.ndarray, config: ReconstructConfig
+) -> tuple[np.ndarray, float, float]:
+    """RANSAC plane, refined by least squares on its inliers; normal towards the cameras."""
+    import open3d as o3d
+
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(footprint)
+    if len(pcd.points) < 3:
+        raise ReconstructError("too few points to fit the support plane")
+    model, _ = pcd.segment_plane(
+        distance_threshold=threshold, ransac_n=3, num_iterations=config.plane_ransac_iterations
+    )
+    normal, offset = np.asarray(model[:3], float), float(model[3])
+    scale = np.linalg.norm(normal)
+    normal, offset = normal / scale, offset / scale
+    # least squares on the inliers until they stop changing: the result no longer depends on
+    # which (multi-threaded, hence unrepeatable) RANSAC sample won, so reruns are identical
+    previous = None
+    for _ in range(30):
+        selected = np.abs(points @ normal + offset) < threshold
+        if previous is not None and np.array_equal(selected, previous):
+            break
+        previous = selected
+        inliers = points[selected]
+        centroid = inliers.mean(axis=0)
+        _, _, Vt = np.linalg.svd(inliers - centroid, full_matrices=False)
+        normal = Vt[2] * np.sign(Vt[2] @ normal)
+        offset = -float(normal @ centroid)
+    if np.mean(cameras @ normal + offset) < 0:
+        normal, offset = -normal, -offset
+    rms = float(np.sqrt(np.mean((inliers @ normal + offset) ** 2)))
+    return normal, offset, rms
+
+
+def _choose_cluster(points: np.ndarray, labels: np.ndarray, views: list[_View], use_masks: bool) -> int | None:
+    """The object's cluster: the largest with masks, else the one nearest the image centres."""
+    ids, counts = np.unique(labels[labels >= 0], return_counts=True)
+    if len(ids) == 0:
+        return None
+    if use_masks:
+        return int(ids[np.argmax(counts)])
+    keep = counts >= 0.05 * counts.max()
+    ids = ids[keep]
+    scores = []
+    for i in ids:
+        c = points[labels == i].mean(axis=0)
+        r = []
+        for v in views:
+            T = v.T_world_camera
+            p = T[:3, :3].T @ (c - T[:3, 3])
+            if p[2] <= 0:
+                continue
+            intr = v.intrinsics
+            u, w = intr.fx * p[0] / p[2] + intr.cx, intr.fy * p[1] / p[2] + intr.cy
+            r.append(np.hypot((u - 0.5 * intr.width) / intr.width, (w - 0.5 * intr.height) / intr.height))
+        scores.append(np.mean(r) if r else np.inf)
+    return int(ids[int(np.argmin(scores))])
+
+
+# ---------------------------------------------------------------------------------------------
+# pose refinement
+
+
+def _refine_poses(
+    views: list[_View],
+    grid: "_Grid",
+    lo: np.ndarray,
+    hi: np.ndarray,
+    centre: np.ndarray,
+    max_distance: float,
+    config: ReconstructConfig,
+) -> tuple[list[_View], float]:
+    """Register each view's points to the fused surface (point-to-plane ICP), removing the mean correction.
+
+    Returns the corrected views and the largest remaining shift of the object's centre [m].
+    """
+    import open3d as o3d
+    from scipy.spatial.transform import Rotation
+
+    model = grid.vbg.extract_point_cloud(weight_threshold=3.0).to_legacy()
+    if len(model.points) < 100:
+        return views, 0.0
+    model.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * grid.voxel_size_m, max_nn=30))
+    estimation = o3d.pipelines.registration.TransformationEstimationPointToPlane()
+    criteria = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=30)
+    stride = max(1, config.segmentation_stride // 2)
+    corrections = []
+    for view in views:
+        points, _ = _backproject(view, stride, config.depth_trunc_m)
+        points = points[np.all((points >= lo) & (points <= hi), axis=1)]
+        C = np.eye(4)
+        if len(points) >= 100:
+            source = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+            result = o3d.pipelines.registration.registration_icp(
+                source, model, max_distance, np.eye(4), estimation, criteria
+            )
+            if result.fitness > 0.5:
+                C = np.asarray(result.transformation)
+        corrections.append(C)
+    # remove the mean correction (as a rotation about the object's centre and a shift of it)
+    rotvecs = np.array([Rotation.from_matrix(C[:3, :3]).as_rotvec() for C in corrections])
+    shifts = np.array([C[:3, :3] @ centre + C[:3, 3] - centre for C in corrections])
+    mean = np.eye(4)
+    mean[:3, :3] = Rotation.from_rotvec(rotvecs.mean(axis=0)).as_matrix()
+    mean[:3, 3] = centre + shifts.mean(axis=0) - mean[:3, :3] @ centre
+    unbias = np.linalg.inv(mean)
+    out, moved = [], 0.0
+    for view, C in zip(views, corrections):
+        C = unbias @ C
+        moved = max(moved, float(np.linalg.norm(C[:3, :3] @ centre + C[:3, 3] - centre)))
+        out.append(_View(view.depth_m, view.mask, view.intrinsics, C @ view.T_world_camera))
+    return out, moved
+
+
+# ---------------------------------------------------------------------------------------------
+# fusion
+
+
+@dataclass(eq=False)
+class _Grid:
+    """A dense voxel box taken from the VoxelBlockGrid; arrays indexed [x, y, z]."""
+
+    vbg: object
+    buf_indices: np.ndarray  # active buffer index of each block, shape [nbx, nby, nbz]
+    origin_index: np.ndarray  # integer voxel coordinates of [0, 0, 0]
+    voxel_size_m: float
+    tsdf: np.ndarray  # [-1, 1], in units of the truncation distance
+    weight: np.ndarray  # number of views that updated the voxel
+
+    def points(self, flat_index: np.ndarray) -> np.ndarray:
+        """World positions [m] of voxels given by flat [x, y, z] index."""
+        ijk = np.stack(np.unravel_index(flat_index, self.tsdf.shape), axis=1)
+        return (ijk + self.origin_index) * self.voxel_size_m
+
+
+def _fuse(views: list[_View], lo: np.ndarray, hi: np.ndarray, voxel: float, config: ReconstructConfig) -> _Grid:
+    import open3d as o3d
+    import open3d.core as o3c
+
+    block_m = voxel * _BLOCK
+    b_lo = np.floor(lo / block_m).astype(int)
+    b_hi = np.floor(hi / block_m).astype(int)
+    nb = b_hi - b_lo + 1
+    keys = np.stack(np.meshgrid(*(np.arange(a, b + 1) for a, b in zip(b_lo, b_hi)), indexing="ij"), axis=-1)
+    keys = keys.reshape(-1, 3).astype(np.int32)
+    device = o3c.Device("CPU:0")
+    vbg = o3d.t.geometry.VoxelBlockGrid(
+        attr_names=("tsdf", "weight"),
+        attr_dtypes=(o3c.float32, o3c.float32),
+        attr_channels=((1), (1)),
+        voxel_size=voxel,
+        block_resolution=_BLOCK,
+        block_count=int(len(keys)) + 16,
+        device=device,
+    )
+    block_coords = o3c.Tensor(keys, device=device)
+    buf, ok = vbg.hashmap().activate(block_coords)
+    if not ok.numpy().all():
+        raise ReconstructError("could not allocate the TSDF voxel blocks")
+    for view in views:
+        vbg.integrate(
+            block_coords,
+            o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(view.depth_m))),
+            o3c.Tensor(view.K),
+            o3c.Tensor(np.linalg.inv(view.T_world_camera)),
+            depth_scale=1.0,
+            depth_max=float(config.depth_trunc_m),
+            trunc_voxel_multiplier=float(config.sdf_trunc_voxels),
+        )
+    # integrate() activates the blocks again, which may rehash the map and move them: look them up now
+    buf, ok = vbg.hashmap().find(block_coords)
+    if not ok.numpy().all():
+        raise ReconstructError("lost TSDF voxel blocks during integration")
+    buf_indices = buf.numpy().astype(np.int64).reshape(nb)
+    grid = _Grid(vbg, buf_indices, b_lo * _BLOCK, voxel, np.empty(0), np.empty(0))
+    grid.tsdf = _dense(vbg.attribute("tsdf").numpy(), buf_indices)
+    grid.weight = _dense(vbg.attribute("weight").numpy(), buf_indices)
+    return grid
+
+
+def _dense(values: np.ndarray, buf_indices: np.ndarray) -> np.ndarray:
+    """Blocks [buf, z, y, x, 1] -> dense [x, y, z] over the block box."""
+    nb = buf_indices.shape
+    blocks = values[buf_indices.reshape(-1), ..., 0].reshape(*nb, _BLOCK, _BLOCK, _BLOCK)  # bx by bz z y x
+    dense = blocks.transpose(0, 5, 1, 4, 2, 3)  # bx x by y bz z
+    return np.ascontiguousarray(dense.reshape(nb[0] * _BLOCK, nb[1] * _BLOCK, nb[2] * _BLOCK))
+
+
+def _store(dense: np.ndarray, values: np.ndarray, buf_indices: np.ndarray) -> None:
+    """Inverse of `_dense`: write a dense [x, y, z] array back into the blocks."""
+    nb = buf_indices.shape
+    blocks = dense.reshape(nb[0], _BLOCK, nb[1], _BLOCK, nb[2], _BLOCK).transpose(0, 2, 4, 5, 3, 1)
+    values[buf_indices.reshape(-1), ..., 0] = blocks.reshape(-1, _BLOCK, _BLOCK, _BLOCK)
+
+
+def _close_field(
+    grid: _Grid,
+    views: list[_View],
+    normal: np.ndarray,
+    offset: float,
+    cut_m: float,
+    trunc_m: float,
+    depth_trunc_m: float,
+) -> None:
+    """Decide the unobserved voxels and intersect with the half-space above the cut, in place."""
+    field = grid.tsdf.reshape(-1)
+    undecided = np.flatnonzero(grid.weight.reshape(-1) <= 0)
+    field[undecided] = 1.0  # empty unless some view sees it behind a surface
+    p = grid.points(undecided).astype(np.float32)
+    for view in views:  # a voxel leaves the list at the first view it is hidden in
+        if not len(undecided):
+            break
+        T = view.T_world_camera.astype(np.float32)
+        q = (p - T[:3, 3]) @ T[:3, :3]
+        intr = view.intrinsics
+        z = q[:, 2]
+        zs = np.where(z > 1e-6, z, np.float32(1.0))
+        u = np.floor(intr.fx * q[:, 0] / zs + intr.cx)
+        v = np.floor(intr.fy * q[:, 1] / zs + intr.cy)
+        inside = np.flatnonzero((z > 1e-6) & (u >= 0) & (u < intr.width) & (v >= 0) & (v < intr.height))
+        d = view.depth_m[v[inside].astype(np.intp), u[inside].astype(np.intp)]
+        behind = (d > 0) & (d <= depth_trunc_m) & (d < z[inside] - trunc_m)
+        hidden = inside[behind]
+        field[undecided[hidden]] = -1.0
+        keep = np.ones(len(undecided), bool)
+        keep[hidden] = False
+        undecided, p = undecided[keep], p[keep]
+    # intersect with the half-space above the cut: the table goes, the footprint closes
+    t = grid.tsdf
+    axes = [(np.arange(n) + o) * grid.voxel_size_m for n, o in zip(t.shape, grid.origin_index)]
+    heights = (
+        normal[0] * axes[0][:, None, None] + normal[1] * axes[1][None, :, None] + normal[2] * axes[2][None, None, :]
+    ) + offset
+    np.maximum(t, np.clip((cut_m - heights) / trunc_m, -1.0, 1.0).astype(t.dtype), out=t)
+    for axis in range(3):  # an empty border closes every surface
+        sl = [slice(None)] * 3
+        sl[axis] = slice(0, 2)
+        t[tuple(sl)] = 1.0
+        sl[axis] = slice(-2, None)
+        t[tuple(sl)] = 1.0
+
+
+def _extract(grid: _Grid):
+    """Marching cubes on the closed field, through Open3D's VoxelBlockGrid."""
+    import trimesh
+
+    _store(grid.tsdf, grid.vbg.attribute("tsdf").numpy(), grid.buf_indices)
+    grid.vbg.attribute("weight").numpy()[grid.buf_indices.reshape(-1)] = 1.0
+    tm = grid.vbg.extract_triangle_mesh(weight_threshold=0.5)
+    vertices = tm.vertex.positions.numpy().astype(np.float64)
+    faces = tm.triangle.indices.numpy().astype(np.int64)
+    if len(faces) == 0:
+        raise ReconstructError("marching cubes found no surface: nothing solid above the support plane")
+    mesh = trimesh.Trimesh(vertices, faces, process=True)
+    return _canonical(mesh)
+
+
+def _canonical(mesh):
+    """The same mesh with vertices and faces in a fixed order (Open3D's parallel marching cubes
+    emits them in a varying order, which would make decimation, and so reruns, differ)."""
+    import trimesh
+
+    v = np.asarray(mesh.vertices)
+    order = np.lexsort(v.T[::-1])
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    f = rank[np.asarray(mesh.faces)]
+    f = np.take_along_axis(f, (np.argmin(f, axis=1)[:, None] + np.arange(3)) % 3, axis=1)  # keeps winding
+    f = f[np.lexsort(f.T[::-1])]
+    return trimesh.Trimesh(v[order], f, process=False)
+
+
+def _largest_volume(mesh, scan: Scan):
+    """The closed component of largest volume, with outward normals."""
+    import trimesh
+
+    parts = mesh.split(only_watertight=False)
+    closed = [p for p in parts if len(p.faces) >= 4 and p.is_watertight and p.area > 0]
+    if not closed:
+        raise ReconstructError(f"{scan.root}: marching cubes gave no closed surface")
+    with np.errstate(all="ignore"):  # slivers have zero volume
+        best = max(closed, key=lambda p: abs(np.nan_to_num(p.volume)))
+    trimesh.repair.fix_normals(best)
+    return best
+
+
+def _lower_cap(mesh, normal: np.ndarray, offset: float, cut_m: float) -> None:
+    """Move the vertices on the cut down onto the support plane, in place."""
+    v = mesh.vertices.copy()
+    h = v @ normal + offset
+    low = h <= cut_m
+    v[low] -= np.outer(h[low], normal)
+    mesh.vertices = v
+
+
+def _smooth(mesh, normal: np.ndarray, offset: float, iterations: int) -> None:
+    """Taubin smoothing in place; vertices on the support plane stay on it."""
+    import trimesh
+
+    if iterations <= 0:
+        return
+    on_plane = np.abs(mesh.vertices @ normal + offset) < 1e-9
+    trimesh.smoothing.filter_taubin(mesh, lamb=0.5, nu=0.53, iterations=iterations)
+    v = mesh.vertices.copy()
+    v[on_plane] -= np.outer(v[on_plane] @ normal + offset, normal)
+    mesh.vertices = v
+
+
+def _simplify(mesh, target_faces: int, scan: Scan):
+    """Quadric decimation, keeping watertightness; falls back to milder decimation, then none."""
+    import open3d as o3d
+    import trimesh
+
+    def ok(m) -> bool:
+        return m.is_watertight and m.is_winding_consistent and m.volume > 0 and m.is_volume
+
+    if target_faces and len(mesh.faces) > target_faces:
+        legacy = o3d.geometry.TriangleMesh(
+            o3d.utility.Vector3dVector(mesh.vertices), o3d.utility.Vector3iVector(mesh.faces)
+        )
+        for factor in (1, 2, 4):
+            target = target_faces * factor
+            if target >= len(mesh.faces):
+                break
+            simple = legacy.simplify_quadric_decimation(target_number_of_triangles=target)
+            out = trimesh.Trimesh(np.asarray(simple.vertices), np.asarray(simple.triangles), process=True)
+            out.update_faces(out.nondegenerate_faces())
+            out.remove_unreferenced_vertices()
+            trimesh.repair.fix_normals(out)
+            if ok(out):
+                return out
+    trimesh.repair.fix_normals(mesh)
+    if ok(mesh):
+        return mesh
+    raise ReconstructError(
+        f"{scan.root}: the reconstructed mesh is not watertight (watertight={mesh.is_watertight}, "
+        f"volume={mesh.volume:.3g} m^3); try a larger voxel_size_m or sdf_trunc_voxels"
+    )

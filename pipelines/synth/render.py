@@ -1,0 +1,300 @@
+"""Render a synthetic RGB-D scan of a mesh resting on a table, in the nerfstudio layout.
+
+The scan is written exactly as `pipelines.scan.read_scan` reads it (DESIGN.md,
+"Inputs"): colour images, 16-bit z-depth PNGs, 8-bit masks (object = 255),
+`transforms.json` with camera-to-world poses in OpenGL axes, and `object.json`.
+
+Cameras sit on rings around the object, looking at its centre. Depth carries
+the noise of a structured-light / time-of-flight sensor: Gaussian with standard
+deviation sigma(z) = sigma_0 + c * z^2, quantised to the depth unit, with
+dropout at random pixels, at grazing angles and at depth discontinuities.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import trimesh
+
+__all__ = ["RenderConfig", "render_scan"]
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """How to render a synthetic scan."""
+
+    width: int = 640
+    """Image width [pixels]."""
+    height: int = 480
+    """Image height [pixels]."""
+    fx: float = 600.0
+    """Horizontal focal length [pixels]; the principal point is the image centre."""
+    fy: float = 600.0
+    """Vertical focal length [pixels]."""
+    view_count: int = 24
+    """Number of views, spread evenly over the rings in `elevations_deg`."""
+    elevations_deg: tuple[float, ...] = (25.0, 45.0, 65.0)
+    """Camera elevation of each ring above the table plane [deg], 0-90."""
+    distance_range_m: tuple[float, float] = (0.35, 0.5)
+    """Camera distance from the object's centre [m], drawn uniformly per view."""
+    azimuth_jitter_deg: float = 5.0
+    """Uniform jitter of each view's azimuth [deg]."""
+    look_at_jitter_m: float = 0.005
+    """Standard deviation of the look-at point around the object's centre [m]."""
+    depth_noise_base_m: float = 0.5e-3
+    """Depth noise floor sigma_0 [m]."""
+    depth_noise_quadratic_per_m: float = 1.5e-3
+    """Depth noise growth c [1/m]: sigma(z) = sigma_0 + c z^2 (0.74 mm at 0.4 m)."""
+    depth_unit_m: float = 0.001
+    """Depth quantisation and the written depth_unit_scale_factor [m per unit]."""
+    depth_range_m: tuple[float, float] = (0.1, 3.0)
+    """Sensor range [m]; depth outside reads 0 (invalid)."""
+    dropout_random: float = 0.01
+    """Fraction of pixels dropped at random, 0-1."""
+    dropout_grazing_cos: float = 0.25
+    """Below this |cos| of the incidence angle a pixel is dropped with probability
+    1 - |cos| / dropout_grazing_cos."""
+    dropout_edge: float = 0.5
+    """Probability of dropping a pixel at a depth discontinuity, 0-1."""
+    edge_jump_m: float = 0.01
+    """Depth difference to a neighbouring pixel that marks a discontinuity [m]."""
+    table_size_m: tuple[float, float] = (0.3, 0.3)
+    """Table top extent along world x and y [m], centred under the object."""
+    table_thickness_m: float = 0.03
+    """Table thickness [m]."""
+    object_rgb: tuple[int, int, int] = (196, 84, 60)
+    """Object albedo, 8-bit RGB."""
+    table_rgb: tuple[int, int, int] = (150, 132, 105)
+    """Table albedo, 8-bit RGB."""
+    texture_amplitude: float = 0.15
+    """Relative amplitude of the world-fixed procedural texture, 0-1."""
+    color_noise: float = 2.0
+    """Per-pixel colour noise standard deviation [8-bit levels]."""
+    color_format: Literal["jpg", "png"] = "jpg"
+    """Colour image file format."""
+    jpeg_quality: int = 85
+    """JPEG quality, 1-95."""
+    write_masks: bool = True
+    """Write object masks (masks/, object = 255) and list them in transforms.json."""
+    pose_noise_translation_m: float = 0.0
+    """Standard deviation of the error added to each written camera position [m]
+    (rendering uses the true pose)."""
+    pose_noise_rotation_deg: float = 0.0
+    """Standard deviation of the error added to each written camera orientation [deg]."""
+
+
+def render_scan(
+    mesh_world: "trimesh.Trimesh",
+    out_dir: Path,
+    config: RenderConfig = RenderConfig(),
+    rng: np.random.Generator | None = None,
+    name: str = "object",
+    material_hint: str | None = None,
+) -> Path:
+    """Raytrace an RGB-D scan of `mesh_world` resting on a table and write it to `out_dir`.
+
+    Args:
+        mesh_world: trimesh.Trimesh in world coordinates [m], z up. The table's top
+            is placed at the mesh's lowest z, so the object rests on it.
+        out_dir: the scan directory to write (created; existing files are overwritten).
+        config: cameras, sensor noise, scene.
+        rng: all randomness (view jitter, noise, dropout); default seed 0.
+        name, material_hint: written to object.json.
+
+    Returns:
+        out_dir.
+    """
+    import open3d as o3d
+    import trimesh
+    from PIL import Image
+
+    rng = np.random.default_rng(0) if rng is None else rng
+    out_dir = Path(out_dir)
+    for sub in ("images", "depth") + (("masks",) if config.write_masks else ()):
+        (out_dir / sub).mkdir(parents=True, exist_ok=True)
+
+    vertices = np.asarray(mesh_world.vertices, dtype=np.float64)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    table = trimesh.creation.box(extents=(*config.table_size_m, config.table_thickness_m))
+    table.apply_translation((centre[0], centre[1], lo[2] - 0.5 * config.table_thickness_m))
+
+    scene = o3d.t.geometry.RaycastingScene()
+    object_id = scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(np.asarray(mesh_world.faces, dtype=np.uint32))
+    )
+    scene.add_triangles(
+        o3d.core.Tensor(np.asarray(table.vertices, dtype=np.float32)),
+        o3d.core.Tensor(np.asarray(table.faces, dtype=np.uint32)),
+    )
+
+    w, h = config.width, config.height
+    cx, cy = 0.5 * w, 0.5 * h
+    u, v = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)  # pixel centres
+    rays_camera = np.stack([(u - cx) / config.fx, (v - cy) / config.fy, np.ones_like(u)], axis=-1)
+
+    poses = _camera_poses(config, centre, rng)
+    frames = []
+    for i, T_world_camera in enumerate(poses):
+        R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
+        directions = rays_camera @ R.T  # z-component 1 in the camera: t_hit is z-depth
+        rays = np.concatenate([np.broadcast_to(t, directions.shape), directions], axis=-1).astype(np.float32)
+        hit = scene.cast_rays(o3d.core.Tensor(rays))
+        z = hit["t_hit"].numpy().astype(np.float64)
+        ids = hit["geometry_ids"].numpy()
+        normals = hit["primitive_normals"].numpy().astype(np.float64)
+        valid = np.isfinite(z)
+        z[~valid] = 0.0
+        is_object = valid & (ids == object_id)
+
+        unit_dirs = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+        cos_incidence = np.abs(np.einsum("hwk,hwk->hw", normals, unit_dirs))
+        depth = _sensor_depth(z, valid, cos_incidence, config, rng)
+        points = t + z[..., None] * directions
+        color = _shade(points, normals, unit_dirs, valid, is_object, config, rng)
+
+        stem = f"frame_{i:05d}"
+        color_rel = f"images/{stem}.{config.color_format}"
+        if config.color_format == "jpg":
+            Image.fromarray(color).save(out_dir / color_rel, quality=config.jpeg_quality)
+        else:
+            Image.fromarray(color).save(out_dir / color_rel)
+        depth_rel = f"depth/{stem}.png"
+        Image.fromarray(depth).save(out_dir / depth_rel)
+        frame = {"file_path": color_rel, "depth_file_path": depth_rel}
+        if config.write_masks:
+            mask_rel = f"masks/{stem}.png"
+            Image.fromarray((is_object * 255).astype(np.uint8)).save(out_dir / mask_rel)
+            frame["mask_path"] = mask_rel
+        written = _perturb_pose(T_world_camera, config, rng)
+        frame["transform_matrix"] = (written @ _OPENGL_FROM_OPENCV).tolist()
+        frames.append(frame)
+
+    transforms = {
+        "camera_model": "OPENCV",
+        "fl_x": config.fx,
+        "fl_y": config.fy,
+        "cx": cx,
+        "cy": cy,
+        "w": w,
+        "h": h,
+        "k1": 0.0,
+        "k2": 0.0,
+        "p1": 0.0,
+        "p2": 0.0,
+        "depth_unit_scale_factor": config.depth_unit_m,
+        "frames": frames,
+    }
+    (out_dir / "transforms.json").write_text(json.dumps(transforms, indent=1))
+    info = {"name": name, "material": material_hint, "notes": "synthetic scan rendered by pipelines.synth.render"}
+    (out_dir / "object.json").write_text(json.dumps(info, indent=1))
+    (out_dir / "render.json").write_text(json.dumps(_jsonable(asdict(config)), indent=1))
+    return out_dir
+
+
+_OPENGL_FROM_OPENCV = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+def _jsonable(d: dict) -> dict:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Camera-to-world in OpenCV axes (z forward, y down), world z up."""
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, y, z], axis=1)
+    T[:3, 3] = eye
+    return T
+
+
+def _camera_poses(config: RenderConfig, centre: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
+    rings = len(config.elevations_deg)
+    counts = [config.view_count // rings + (r < config.view_count % rings) for r in range(rings)]
+    poses = []
+    for r, (elevation, count) in enumerate(zip(config.elevations_deg, counts)):
+        for k in range(count):
+            azimuth = 2 * np.pi * (k + r / rings) / max(count, 1)
+            azimuth += np.deg2rad(rng.uniform(-1, 1) * config.azimuth_jitter_deg)
+            distance = rng.uniform(*config.distance_range_m)
+            el = np.deg2rad(elevation)
+            eye = centre + distance * np.array([np.cos(el) * np.cos(azimuth), np.cos(el) * np.sin(azimuth), np.sin(el)])
+            target = centre + rng.normal(0.0, config.look_at_jitter_m, 3)
+            poses.append(_look_at(eye, target))
+    return poses
+
+
+def _sensor_depth(
+    z: np.ndarray, valid: np.ndarray, cos_incidence: np.ndarray, config: RenderConfig, rng: np.random.Generator
+) -> np.ndarray:
+    """Noisy, quantised z-depth in depth units (uint16), 0 where invalid."""
+    sigma = config.depth_noise_base_m + config.depth_noise_quadratic_per_m * z**2
+    noisy = z + sigma * rng.standard_normal(z.shape)
+    keep = valid & (noisy >= config.depth_range_m[0]) & (noisy <= config.depth_range_m[1])
+    keep &= rng.random(z.shape) >= config.dropout_random
+    if config.dropout_grazing_cos > 0:
+        p_drop = np.clip(1.0 - cos_incidence / config.dropout_grazing_cos, 0.0, 1.0)
+        keep &= rng.random(z.shape) >= p_drop
+    zf = np.where(valid, z, 1e6)  # escaped rays: far away, so their border is an edge
+    edge = np.zeros(z.shape, bool)
+    for axis in (0, 1):
+        jump = np.abs(np.diff(zf, axis=axis)) > config.edge_jump_m
+        if axis == 0:
+            edge[1:] |= jump
+            edge[:-1] |= jump
+        else:
+            edge[:, 1:] |= jump
+            edge[:, :-1] |= jump
+    keep &= ~(edge & (rng.random(z.shape) < config.dropout_edge))
+    units = np.rint(noisy / config.depth_unit_m)
+    return np.where(keep, np.clip(units, 0, 65535), 0).astype(np.uint16)
+
+
+def _perturb_pose(T: np.ndarray, config: RenderConfig, rng: np.random.Generator) -> np.ndarray:
+    """The pose as a tracker would report it: the true one plus small random errors."""
+    if config.pose_noise_translation_m <= 0 and config.pose_noise_rotation_deg <= 0:
+        return T
+    from scipy.spatial.transform import Rotation
+
+    out = T.copy()
+    rotvec = np.deg2rad(config.pose_noise_rotation_deg) * rng.standard_normal(3)
+    out[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix() @ T[:3, :3]
+    out[:3, 3] += config.pose_noise_translation_m * rng.standard_normal(3)
+    return out
+
+
+def _shade(
+    points: np.ndarray,
+    normals: np.ndarray,
+    unit_dirs: np.ndarray,
+    valid: np.ndarray,
+    is_object: np.ndarray,
+    config: RenderConfig,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Lambertian colour image (uint8 HxWx3): a key light from above, a headlight, ambient."""
+    key = np.array([0.3, 0.2, 0.93])
+    key /= np.linalg.norm(key)
+    facing = np.where(np.einsum("hwk,hwk->hw", normals, unit_dirs)[..., None] > 0, -normals, normals)
+    light = 0.25 + 0.45 * np.clip(facing @ key, 0, None) + 0.3 * np.abs(np.einsum("hwk,hwk->hw", normals, unit_dirs))
+    p = points / 0.01  # texture coordinates in centimetres, fixed to the world
+    texture = (
+        np.sin(p[..., 0] * 1.3 + np.sin(p[..., 1] * 0.7))
+        + np.sin(p[..., 1] * 1.7 + np.sin(p[..., 2] * 0.9))
+        + np.sin(p[..., 2] * 2.1 + np.sin(p[..., 0] * 1.1))
+    ) / 3.0
+    albedo = np.where(is_object[..., None], np.array(config.object_rgb, float), np.array(config.table_rgb, float))
+    color = albedo * (light * (1.0 + config.texture_amplitude * texture))[..., None]
+    color = np.where(valid[..., None], color, 40.0)  # dark background where rays escape
+    color += config.color_noise * rng.standard_normal(color.shape)
+    return np.clip(np.rint(color), 0, 255).astype(np.uint8)
