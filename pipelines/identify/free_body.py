@@ -41,7 +41,7 @@ class IdentifyConfig:
     """lambda of the bound penalty (RigPI)."""
     max_iterations: int = 300
     """L-BFGS-B iterations per round."""
-    rounds: tuple[str, ...] = ("pose", "momentum", "momentum")
+    rounds: tuple[str, ...] = ("momentum",)
     """Successive fits, each from the last, with channels rescaled by the last residual level:
     "pose" is the plain pose loss (robust from a far prior, but biased by wrench noise),
     "momentum" the mass- and inertia-scaled one (unbiased; see `eval_tracked_pose_error`)."""

@@ -140,3 +140,20 @@ def make_windows(
         measured_quat_xyzw=rot[sample_idx.reshape(-1)].as_quat().reshape(samples + 1, len(starts), 4),
         start_twist=twist,
     )
+
+
+def concat_windows(parts: list[ShootingWindows]) -> ShootingWindows:
+    """Windows of several recordings as one batch; they must share step, substeps and length."""
+    first = parts[0]
+    for p in parts[1:]:
+        if (p.dt_s, p.substeps, p.step_count) != (first.dt_s, first.substeps, first.step_count):
+            raise ValueError("recordings differ in pose rate; their windows cannot share one batch")
+    return ShootingWindows(
+        dt_s=first.dt_s,
+        substeps=first.substeps,
+        t_start_s=np.concatenate([p.t_start_s for p in parts]),
+        wrench=np.concatenate([p.wrench for p in parts], axis=1),
+        measured_position=np.concatenate([p.measured_position for p in parts], axis=1),
+        measured_quat_xyzw=np.concatenate([p.measured_quat_xyzw for p in parts], axis=1),
+        start_twist=np.concatenate([p.start_twist for p in parts], axis=0),
+    )
