@@ -77,6 +77,9 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         if not Path(path).is_file():
             raise BuildError(f"{path}: recording not found")
 
+    # Recordings are read first: they are quick, and a bad file should fail before minutes of geometry.
+    trials = [timer.run(f"logs {p.name}", read_recording, p) for p in config.logs]
+    holdout = timer.run(f"logs {config.holdout.name}", read_recording, config.holdout) if config.holdout else None
     mesh_world, name, hint, scan_stats = timer.run("scan + reconstruct", _object_mesh, config)
     name = config.name or name
     placement = Pose(tuple(mesh_world.center_mass), (0.0, 0.0, 0.0, 1.0))
@@ -89,8 +92,6 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     material = material_range(config.material or hint)
     prior = timer.run("priors", uniform_density_prior, mesh_object, material)
 
-    trials = [timer.run(f"logs {p.name}", read_recording, p) for p in config.logs]
-    holdout = timer.run(f"logs {config.holdout.name}", read_recording, config.holdout) if config.holdout else None
     X_tracked_body = tracked_to_object(trials[0], placement)
 
     bounds = InertialBounds(prior.lower, prior.upper)

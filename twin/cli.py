@@ -49,6 +49,16 @@ class Synth:
     seed: int = 0
 
 
+@dataclass(frozen=True)
+class Bench:
+    """Benchmarks that print a table. sample: cold and warm builds of a synthetic sample against its truth."""
+
+    what: tyro.conf.Positional[Literal["sample"]]
+    sample: Path = Path("samples/cube")
+    """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
+    methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
+
+
 def _log(message: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {message}", flush=True)
 
@@ -86,12 +96,16 @@ def main(argv: list[str] | None = None) -> int:
 
     wp.config.quiet = True
     wp.config.verbose = False
-    command = tyro.extras.subcommand_cli_from_dict({"build": Build, "synth": Synth}, args=argv)
+    command = tyro.extras.subcommand_cli_from_dict({"build": Build, "synth": Synth, "bench": Bench}, args=argv)
     try:
         if isinstance(command, Build):
             _run_build(command)
-        else:
+        elif isinstance(command, Synth):
             _run_synth(command)
+        else:
+            from twin.bench import bench_sample
+
+            bench_sample(command.sample, command.methods)
     except (ValueError, RuntimeError, OSError) as exc:
         print(f"twin: error: {exc}", file=sys.stderr)
         return 1

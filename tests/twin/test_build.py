@@ -1,0 +1,115 @@
+"""End to end: `twin build` on the bundled sample, and clean failures on bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+SAMPLE = REPO / "samples" / "cube"
+
+
+def twin(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "twin.cli", *args], capture_output=True, text=True, cwd=REPO)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    """The sample built once into a temporary out/."""
+    out = tmp_path_factory.mktemp("build") / "out"
+    proc = twin("build", str(SAMPLE / "scan"), "--logs", str(SAMPLE / "trial.mcap"),
+                "--holdout", str(SAMPLE / "heldout.mcap"), "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def test_build_writes_every_file(built):
+    """asset.json, the three formats, meshes and the report exist and asset.json follows the contract."""
+    asset = json.loads((built / "asset.json").read_text())
+    assert asset["schema"] == "twin.asset/1" and asset["kind"] == "free"
+    for key in ("urdf", "mjcf", "usd", "report"):
+        assert (built / asset["files"][key]).is_file()
+    assert (built / "meshes" / "visual.obj").is_file() and asset["geometry"]["collision"]
+    assert set(asset["theta"]) == {"mass", "com", "inertia", "friction"}
+    assert asset["fit"]["final"]["rmse_position_m"] < asset["fit"]["baseline"]["rmse_position_m"]
+    assert all(check["ok"] for check in asset["provenance"]["validation"]["checks"])
+    assert "<img" in (built / "report.html").read_text()
+
+
+def test_build_recovers_the_sample_truth(built):
+    """Mass within 2 %, COM within 2 mm, reconstructed volume within 5 % of the synthetic truth."""
+    asset = json.loads((built / "asset.json").read_text())
+    truth = json.loads((SAMPLE / "truth.json").read_text())
+    theta = asset["theta"]
+    assert theta["mass"]["value"] == pytest.approx(truth["mass"], rel=0.02)
+    com_world = np.add(theta["com"]["value"], asset["placement"]["position"])
+    np.testing.assert_allclose(com_world, truth["com_world"], atol=2e-3)
+    assert asset["provenance"]["decompose"]["volume_mesh_m3"] == pytest.approx(truth["volume_m3"], rel=0.05)
+
+
+def _assert_clean_failure(proc, path_fragment: str, out: Path, marker: str):
+    assert proc.returncode == 1
+    lines = [line for line in proc.stderr.strip().splitlines() if line.startswith("twin: error:")]
+    assert len(lines) == 1 and path_fragment in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert (out / "marker.txt").read_text() == marker
+
+
+@pytest.fixture
+def existing_out(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "marker.txt").write_text("previous build")
+    return out
+
+
+def test_truncated_mcap_fails_cleanly(tmp_path, existing_out):
+    """A truncated recording gives one error line naming it and leaves out/ untouched."""
+    bad = tmp_path / "truncated.mcap"
+    data = (SAMPLE / "trial.mcap").read_bytes()
+    bad.write_bytes(data[: len(data) // 2])
+    proc = twin("build", str(SAMPLE / "scan"), "--logs", str(bad), "-o", str(existing_out))
+    _assert_clean_failure(proc, "truncated.mcap", existing_out, "previous build")
+
+
+def test_mcap_without_wrench_fails_cleanly(tmp_path, existing_out):
+    """A recording with no wrench topic gives one error line saying so."""
+    from pipelines.logs import read_recording
+    from pipelines.synth.recording import write_recording
+
+    rec = read_recording(SAMPLE / "trial.mcap")
+    pose_only = tmp_path / "pose_only.mcap"
+    write_recording(pose_only, pose=rec.pose, wrench=rec.wrench_raw)
+    # rewrite without the wrench channel: keep only the pose messages
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(pose_only, "rb") as src, open(tmp_path / "no_wrench.mcap", "wb") as dst:
+        reader = make_reader(src)
+        writer = Writer(dst)
+        writer.start()
+        ids = {}
+        for schema, channel, message in reader.iter_messages(topics=["/tracker/pose"]):
+            if channel.id not in ids:
+                sid = writer.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.id] = writer.register_channel(channel.topic, channel.message_encoding, sid)
+            writer.add_message(ids[channel.id], message.log_time, message.data, message.publish_time)
+        writer.finish()
+    proc = twin("build", str(SAMPLE / "scan"), "--logs", str(tmp_path / "no_wrench.mcap"), "-o", str(existing_out))
+    _assert_clean_failure(proc, "no_wrench.mcap", existing_out, "previous build")
+    assert "wrench" in proc.stderr
+
+
+def test_scan_without_depth_fails_cleanly(tmp_path, existing_out):
+    """A scan directory whose depth images are missing gives one error line naming the file."""
+    scan = tmp_path / "scan"
+    shutil.copytree(SAMPLE / "scan", scan)
+    shutil.rmtree(scan / "depth")
+    proc = twin("build", str(scan), "--logs", str(SAMPLE / "trial.mcap"), "-o", str(existing_out))
+    _assert_clean_failure(proc, "depth", existing_out, "previous build")
