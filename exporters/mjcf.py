@@ -15,9 +15,10 @@ import numpy as np
 
 from assets import Asset
 
+from .preconditions import exportable_inertial
+
 __all__ = ["export_mjcf"]
 
-_FREE_KINDS: tuple[str, ...] = ("free", "sliding")
 """Kinds written as one body on a free joint (no support plane: DESIGN.md)."""
 
 # MuJoCo's defaults for the torsional and rolling coefficients; only sliding
@@ -48,23 +49,16 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
         ValueError: for kinds other than "free"/"sliding", an unphysical inertia
             tensor, no collision parts or clashing mesh file stems.
     """
-    if asset.kind not in _FREE_KINDS:
-        raise ValueError(f"export_mjcf: kind {asset.kind!r} is not supported yet (only {_FREE_KINDS})")
     out_dir = Path(out_dir)
     path = out_dir / f"{asset.name}.xml"
     mesh_paths = [asset.geometry.visual, *asset.geometry.collision]
-    if not asset.geometry.collision:
-        raise ValueError(f"{path}: asset {asset.name!r} has no collision parts")
     names = [_mesh_name(p) for p in mesh_paths]
     if len(set(names)) != len(names):
         raise ValueError(f"{path}: mesh file stems must be unique, got {names}")
     # meshdir is the deepest folder holding every mesh, so file= stays short.
     meshdir = os.path.commonpath([str(PurePosixPath(p).parent) for p in mesh_paths]) or "."
 
-    inertial = asset.theta.inertial()
-    if violation := inertial.physical_violation():
-        # MuJoCo rejects such a tensor and Newton silently "balances" it.
-        raise ValueError(f"{path}: cannot write asset {asset.name!r}: {violation}")
+    inertial = exportable_inertial(asset, path, "export_mjcf")
     I = inertial.inertia_matrix()
     mu = float(asset.theta.friction.value)
     x, y, z, w = asset.placement.quaternion_xyzw

@@ -15,9 +15,10 @@ import numpy as np
 
 from assets import Asset
 
+from .preconditions import exportable_inertial
+
 __all__ = ["export_urdf"]
 
-_FREE_KINDS: tuple[str, ...] = ("free", "sliding")
 
 
 def _num(values) -> str:
@@ -46,17 +47,10 @@ def export_urdf(asset: Asset, out_dir: Path) -> Path:
         ValueError: for kinds other than "free"/"sliding", an unphysical inertia
             tensor or no collision parts.
     """
-    if asset.kind not in _FREE_KINDS:
-        raise ValueError(f"export_urdf: kind {asset.kind!r} is not supported yet (only {_FREE_KINDS})")
     out_dir = Path(out_dir)
     path = out_dir / f"{asset.name}.urdf"
-    if not asset.geometry.collision:
-        raise ValueError(f"{path}: asset {asset.name!r} has no collision parts")
 
-    inertial = asset.theta.inertial()
-    if violation := inertial.physical_violation():
-        # MuJoCo rejects such a tensor and Newton silently "balances" it.
-        raise ValueError(f"{path}: cannot write asset {asset.name!r}: {violation}")
+    inertial = exportable_inertial(asset, path, "export_urdf")
     I = inertial.inertia_matrix()
     mu = repr(float(asset.theta.friction.value))
     p, q = asset.placement.position, asset.placement.quaternion_xyzw

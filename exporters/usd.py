@@ -23,9 +23,10 @@ import numpy as np
 
 from assets import Asset
 
+from .preconditions import exportable_inertial
+
 __all__ = ["export_usd"]
 
-_FREE_KINDS: tuple[str, ...] = ("free", "sliding")
 
 
 def _quat_wxyz_from_matrix(R: np.ndarray) -> tuple[float, float, float, float]:
@@ -83,17 +84,10 @@ def export_usd(asset: Asset, out_dir: Path) -> Path:
     """
     from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 
-    if asset.kind not in _FREE_KINDS:
-        raise ValueError(f"export_usd: kind {asset.kind!r} is not supported yet (only {_FREE_KINDS})")
     out_dir = Path(out_dir)
     path = out_dir / f"{asset.name}.usda"
-    if not asset.geometry.collision:
-        raise ValueError(f"{path}: asset {asset.name!r} has no collision parts")
 
-    inertial = asset.theta.inertial()
-    if violation := inertial.physical_violation():
-        # diagonalInertia must be non-negative, and Newton silently "balances" bad tensors.
-        raise ValueError(f"{path}: cannot write asset {asset.name!r}: {violation}")
+    inertial = exportable_inertial(asset, path, "export_usd")
     I = inertial.inertia_matrix()
     moments, axes = inertial.principal()
 

@@ -59,7 +59,7 @@ class StageTimer:
 def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     """Run every stage and write config.output atomically; returns the output directory."""
     from assets import (
-        Asset, Estimate, Fit, FitMetrics, Geometry, Material, Pose, Theta, asset_to_json, write_asset,
+        Asset, Estimate, Fit, Geometry, Material, Pose, Theta, asset_to_json, write_asset,
     )
     from assets.materials import material_range
     from exporters import export_all
@@ -110,10 +110,27 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         inertial, covariance, loss_history = ls.inertial, ls.covariance, ()
         method_info = {"cutoff_hz": ls.cutoff_hz, "samples": ls.sample_count}
 
+    # With a held-out recording, least squares and the Newton fit compete on predicting it.
     evaluation = holdout or trials[0]
-    fit_baseline, fit_final, traces = timer.run(
-        "fit quality", _fit_quality, evaluation, X_tracked_body, prior.inertial, inertial, id_config
-    )
+    candidates = {"baseline": prior.inertial, "least_squares": ls.inertial}
+    if config.method == "newton":
+        candidates["newton"] = inertial
+    fits, impulse, traces = timer.run("fit quality", _fit_quality, evaluation, X_tracked_body, candidates, id_config)
+    selected = config.method if config.method == "newton" else "least_squares"
+    if holdout is not None and config.method == "newton" and _impulse_score(impulse, "least_squares") < \
+            _impulse_score(impulse, "newton"):
+        selected = "least_squares"
+        inertial, covariance = ls.inertial, ls.covariance
+        log("least squares predicts the held-out recording's impulses better than the Newton fit: keeping it")
+    method_info["selected"] = selected
+    method_info["candidates"] = {
+        k: {"mass": v.mass, "com": list(v.com), "inertia": [list(r) for r in v.inertia]} for k, v in candidates.items()
+    }
+    method_info["heldout_fits"] = {k: asdict(v) | {"impulse_rms": impulse[k]} for k, v in fits.items()} \
+        if holdout is not None else None
+    fit_baseline, fit_final = fits["baseline"], fits[selected]
+    traces = {"t_s": traces["t_s"], "measured_position": traces["measured_position"], "window_s": traces["window_s"],
+              "baseline_position": traces["baseline_position"], "final_position": traces[f"{selected}_position"]}
 
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])
@@ -146,7 +163,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             theta=theta,
             geometry=Geometry("meshes/visual.obj", tuple(collision)),
             material=Material(material.name, float(inertial.mass / mesh_object.volume), material.friction),
-            fit=Fit(FitMetrics(**asdict(fit_baseline)), FitMetrics(**asdict(fit_final)), id_config.window_s),
+            fit=Fit(fit_baseline, fit_final, id_config.window_s),
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), "report": "report.html"}
@@ -156,8 +173,6 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             "scan": scan_stats,
             "decompose": parts.stats | {"volume_union_m3": parts.volume_union_m3, "volume_mesh_m3": parts.volume_mesh_m3},
             "prior": prior.provenance(),
-            "least_squares": {"mass": ls.inertial.mass, "com": list(ls.inertial.com),
-                              "inertia": [list(r) for r in ls.inertial.inertia]},
             "identify": {"method": config.method, **method_info},
             "tracked_frame_in_object": {"position": list(X_tracked_body.inverse().position),
                                         "quaternion_xyzw": list(X_tracked_body.inverse().quaternion_xyzw)},
@@ -201,7 +216,7 @@ def _object_mesh(config: BuildConfig):
     raise BuildError(f"{source}: not a scan directory or a mesh file ({', '.join(MESH_SUFFIXES)})")
 
 
-def tracked_to_object(recording, placement) -> "Pose":
+def tracked_to_object(recording, placement):
     """The object frame in the tracked frame, from the scan placement and the first still poses.
 
     The object sits at its placement when the recording starts; poses in the
@@ -257,31 +272,46 @@ def _clip_into_bounds(inertial, prior, bounds):
     return candidate
 
 
-def _fit_quality(recording, X_tracked_body, prior_inertial, final_inertial, id_config):
-    """Windowed replay from measured states at the prior and at the estimate; RMSEs and traces."""
-    from pipelines.identify.free_body import FitQuality
+def _fit_quality(recording, X_tracked_body, candidates: dict, id_config):
+    """Windowed replay from measured states for each candidate body.
+
+    Returns FitMetrics per candidate, its momentum-scaled RMS (position, rotation), and position traces.
+    """
+    from assets import FitMetrics
     from pipelines.identify.inertia import theta_from_physical
     from pipelines.identify.rollout import FreeBodyRollout
 
     windows = _windows([recording], id_config)
     rollout = FreeBodyRollout(windows, X_tracked_body)
-    out, traces = [], {"t_s": (windows.t_start_s[None, :] + windows.dt_s * windows.substeps
-                               * np.arange(1, windows.sample_count + 1)[:, None]).T.reshape(-1).tolist(),
-                       "measured_position": windows.measured_position[1:].transpose(1, 0, 2).reshape(-1, 3).tolist()}
-    for label, inertial in (("baseline", prior_inertial), ("final", final_inertial)):
+    t = windows.t_start_s[None, :] + windows.dt_s * windows.substeps * np.arange(1, windows.sample_count + 1)[:, None]
+    measured = windows.measured_position[1:]
+    traces = {"t_s": t.T.reshape(-1).tolist(), "measured_position": measured.transpose(1, 0, 2).reshape(-1, 3).tolist(),
+              "window_s": windows.window_s}
+    fits, impulse = {}, {}
+    for label, inertial in candidates.items():
         theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())
+        scaled = rollout.residuals(theta, momentum_scaled=True)
+        impulse[label] = [float(np.sqrt(np.mean(np.sum(scaled[..., :3] ** 2, -1)))),
+                          float(np.sqrt(np.mean(np.sum(scaled[..., 3:] ** 2, -1))))]
         r = rollout.residuals(theta, momentum_scaled=False)
         rp, rr = r[..., :3], r[..., 3:]
-        out.append(FitQuality(
+        fits[label] = FitMetrics(
             rmse_position_m=float(np.sqrt(np.mean(np.sum(rp**2, -1)))),
             rmse_rotation_rad=float(np.sqrt(np.mean(np.sum(rr**2, -1)))),
             loss=float(np.mean(np.sum(rp**2, -1) + np.sum(rr**2, -1))),
-        ))
-        sim = windows.measured_position[1:] + rp
-        traces[f"{label}_position"] = sim.transpose(1, 0, 2).reshape(-1, 3).tolist()
-        traces[f"{label}_rotation_error"] = np.linalg.norm(rr, axis=-1).T.reshape(-1).tolist()
-    traces["window_s"] = windows.window_s
-    return out[0], out[1], traces
+        )
+        traces[f"{label}_position"] = (measured + rp).transpose(1, 0, 2).reshape(-1, 3).tolist()
+    return fits, impulse, traces
+
+
+def _impulse_score(impulse: dict, label: str) -> float:
+    """Held-out error in momentum-scaled units (see eval_tracked_pose_error), relative to least squares.
+
+    The plain pose error favours too-large inertia when the wrench is noisy;
+    scaled by each candidate's own mass and inertia it ranks them without that bias.
+    """
+    ref = impulse["least_squares"]
+    return sum((x / max(r, 1e-30)) ** 2 for x, r in zip(impulse[label], ref))
 
 
 def _progress_logger(log):

@@ -1,10 +1,10 @@
 """identify: inertial parameters of a held body from recordings, by differentiable simulation in Newton."""
 
-from .free_body import FitQuality, Identification, IdentifyConfig, InertialBounds, identify_free_body
+from .free_body import Identification, IdentifyConfig, InertialBounds, identify_free_body
 from .least_squares import LeastSquaresResult, identify_least_squares
 from .windows import ShootingWindows, concat_windows, make_windows
 
 __all__ = [
-    "FitQuality", "Identification", "IdentifyConfig", "InertialBounds", "LeastSquaresResult", "ShootingWindows",
+    "Identification", "IdentifyConfig", "InertialBounds", "LeastSquaresResult", "ShootingWindows",
     "concat_windows", "identify_free_body", "identify_least_squares", "make_windows",
 ]

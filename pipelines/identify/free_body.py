@@ -75,15 +75,6 @@ class InertialBounds:
 
 
 @dataclass(frozen=True)
-class FitQuality:
-    """Tracked-frame error of windows simulated from measured states."""
-
-    rmse_position_m: float
-    rmse_rotation_rad: float
-    loss: float
-
-
-@dataclass(frozen=True)
 class Identification:
     """Result: the identified body, its uncertainty, and how the fit went.
 

@@ -43,7 +43,7 @@ def test_build_writes_every_file(built):
 
 
 def test_build_recovers_the_sample_truth(built):
-    """Mass within 2 %, COM within 2 mm, reconstructed volume within 5 % of the synthetic truth."""
+    """Mass within 2 %, principal moments within 5 %, COM within 2 mm, volume within 5 % of the truth."""
     asset = json.loads((built / "asset.json").read_text())
     truth = json.loads((SAMPLE / "truth.json").read_text())
     theta = asset["theta"]
@@ -51,6 +51,8 @@ def test_build_recovers_the_sample_truth(built):
     com_world = np.add(theta["com"]["value"], asset["placement"]["position"])
     np.testing.assert_allclose(com_world, truth["com_world"], atol=2e-3)
     assert asset["provenance"]["decompose"]["volume_mesh_m3"] == pytest.approx(truth["volume_m3"], rel=0.05)
+    principal = np.linalg.eigvalsh(np.asarray(theta["inertia"]["value"]))
+    np.testing.assert_allclose(principal, truth["principal_moments"], rtol=0.05)
 
 
 def _assert_clean_failure(proc, path_fragment: str, out: Path, marker: str):
