@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     import warp as wp
 
     wp.config.quiet = True
-    wp.config.verbose = False
+    wp.config.log_level = wp.LOG_WARNING  # no per-module load lines in the progress log
     command = tyro.extras.subcommand_cli_from_dict({"build": Build, "synth": Synth, "bench": Bench}, args=argv)
     try:
         if isinstance(command, Build):
