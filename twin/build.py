@@ -36,7 +36,7 @@ class BuildConfig:
     name: str | None = None
     method: Literal["newton", "ls"] = "newton"
     window_s: float = 0.1
-    max_iterations: int = 150
+    max_iterations: int = 30
     cache_dir: Path = Path.home() / ".cache" / "twin"
 
 

@@ -31,8 +31,8 @@ class Build:
     """newton: differentiable simulation started from least squares; ls: least squares only."""
     window_s: float = 0.1
     """Shooting-window length [s]."""
-    max_iterations: int = 150
-    """L-BFGS-B iterations per round of the Newton fit."""
+    max_iterations: int = 30
+    """Levenberg-Marquardt iterations of the Newton fit."""
 
 
 @dataclass(frozen=True)

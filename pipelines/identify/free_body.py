@@ -1,11 +1,13 @@
 """Identify mass, COM and inertia of a held rigid body by differentiable simulation in Newton.
 
-Loss (RigPI): the mean squared tracked-frame pose error over shooting windows,
-each channel scaled by its residual level, plus lambda * P(theta, C), the squared
-relative violation of the prior's bounds. theta is the log-Cholesky
-pseudo-inertia (always physical); every window also gets a correction of its
-measured start state, a nuisance parameter of multiple shooting. L-BFGS-B runs
-on gradients from the Warp tape.
+Loss (RigPI): the squared tracked-frame pose error over shooting windows, scaled
+by the body's mass and inertia (see `eval_tracked_pose_error`) and weighted per
+sample by its spread, plus lambda * P(theta, C), the squared relative violation
+of the prior's bounds. theta is the log-Cholesky pseudo-inertia (always
+physical); every window also gets a correction of its measured start state, a
+nuisance parameter of multiple shooting. Levenberg-Marquardt steps use the
+gradient from the Warp tape and Gauss-Newton curvature from batched central
+differences, with each window's correction eliminated in closed form.
 """
 
 from __future__ import annotations
@@ -15,7 +17,6 @@ from dataclasses import asdict, dataclass
 from typing import Callable
 
 import numpy as np
-from scipy.optimize import minimize
 
 from assets import Inertial, Pose
 
@@ -39,14 +40,8 @@ class IdentifyConfig:
     """Newton steps per pose sample."""
     penalty_weight: float = 0.1
     """lambda of the bound penalty (RigPI)."""
-    max_iterations: int = 300
-    """L-BFGS-B iterations per round."""
-    rounds: tuple[str, ...] = ("momentum",)
-    """Successive fits, each from the last, with channels rescaled by the last residual level:
-    "pose" is the plain pose loss (robust from a far prior, but biased by wrench noise),
-    "momentum" the mass- and inertia-scaled one (unbiased; see `eval_tracked_pose_error`)."""
-    estimate_start_state: bool = True
-    """Fit a start-state correction per window (multiple shooting) instead of trusting the measured one."""
+    max_iterations: int = 30
+    """Levenberg-Marquardt iterations (each: one batched Jacobian by central differences)."""
     device: str = "cpu"
 
 
@@ -57,21 +52,16 @@ class InertialBounds:
     lower: tuple[float, ...]
     upper: tuple[float, ...]
 
-    def penalty(self, flat: np.ndarray) -> float:
-        """P(theta, C): squared bound violations relative to the bound width."""
-        x = np.asarray(flat[:7])
-        lo, hi = np.asarray(self.lower), np.asarray(self.upper)
-        width = np.maximum(hi - lo, 1e-12)
-        v = (np.maximum(lo - x, 0) + np.maximum(x - hi, 0)) / width
-        return float(np.sum(v * v))
+    def violation(self, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed bound violations relative to the bound width [7], and d(violation)/d(flat) on the diagonal.
 
-    def penalty_grad(self, flat: np.ndarray) -> np.ndarray:
+        P(theta, C) = sum of squared violations (RigPI's penalty).
+        """
         x = np.asarray(flat[:7])
         lo, hi = np.asarray(self.lower), np.asarray(self.upper)
         width = np.maximum(hi - lo, 1e-12)
-        g = np.zeros(10)
-        g[:7] = 2 * (np.maximum(x - hi, 0) - np.maximum(lo - x, 0)) / width**2
-        return g
+        v = (np.minimum(x - lo, 0) + np.maximum(x - hi, 0)) / width
+        return v, ((x < lo) | (x > hi)) / width
 
 
 @dataclass(frozen=True)
@@ -108,69 +98,28 @@ class Identification:
 def identify_free_body(
     windows: ShootingWindows,
     X_tracked_body: Pose,
-    prior: Inertial,
+    start: Inertial,
     bounds: InertialBounds,
     config: IdentifyConfig,
     progress: Callable[[int, float], None] | None = None,
 ) -> Identification:
-    """Fit theta (and per-window start corrections) to the recording's shooting windows."""
+    """Fit theta (and per-window start corrections) to the recording's shooting windows from `start`."""
     t0 = time.perf_counter()
     rollout = FreeBodyRollout(windows, X_tracked_body, device=config.device)
-    W = windows.window_count
-    theta0 = theta_from_physical(prior.mass, prior.com, prior.inertia_matrix())
-    size = float(np.cbrt(max(prior.mass, 1e-9) / 1000.0))  # length scale of the body at water density [m]
-    theta_scale = np.array([0.5, 0.5, 0.5, 0.5] + [0.2 * size] * 6)
-    n_corr = 12 * W if config.estimate_start_state else 0
-    corr_scale = np.tile(np.concatenate([CORRECTION_SCALE, CORRECTION_RATE_SCALE]), W)
-
-    def unpack(z):
-        theta = theta0 + z[:THETA_SIZE] * theta_scale
-        if not n_corr:
-            return theta, None, None
-        c = (z[THETA_SIZE:] * corr_scale).reshape(W, 12)
-        return theta, c[:, :6], c[:, 6:]
-
-    history: list[float] = []
-    residual_count = windows.sample_count * W
-
-    def objective(z, weight, scaled):
-        theta, corr, corr_rate = unpack(z)
-        loss, g_theta, g_corr, g_rate = rollout.loss_and_grad(theta, corr, corr_rate, weight, scaled)
-        flat = flat_physical(theta)
-        loss += config.penalty_weight * bounds.penalty(flat)
-        g_theta = g_theta + config.penalty_weight * physical_jacobian(theta).T @ bounds.penalty_grad(flat)
-        grad = g_theta * theta_scale
-        if n_corr:
-            grad = np.concatenate([grad, np.concatenate([g_corr, g_rate], axis=1).reshape(-1) * corr_scale])
-        history.append(loss)
-        if progress:
-            progress(len(history), loss)
-        return loss, grad
-
-    z = np.zeros(THETA_SIZE + n_corr)
-    iterations = 0
-    for kind in config.rounds:
-        scaled = kind == "momentum"
-        weight = channel_weights(rollout.residuals(*unpack(z), momentum_scaled=scaled), residual_count)
-        result = minimize(
-            objective, z, args=(weight, scaled), jac=True, method="L-BFGS-B",
-            options={"maxiter": config.max_iterations, "maxcor": 30, "ftol": 1e-12, "gtol": 1e-9},
-        )
-        z = result.x
-        iterations += int(result.nit)
-    theta, corr, corr_rate = unpack(z)
-    r = rollout.residuals(theta, corr, corr_rate)
-    covariance = window_robust_covariance(rollout, theta, corr, corr_rate, channel_weights(r, residual_count))
+    theta = theta_from_physical(start.mass, start.com, start.inertia_matrix())
+    weight = channel_weights(rollout.residuals(theta), windows.sample_count * windows.window_count)
+    theta, corr, rate, history = gauss_newton(rollout, theta, bounds, config, weight, progress)
+    covariance = window_robust_covariance(rollout, theta, corr, rate, weight)
     m, c, I = physical_from_theta(theta)
     return Identification(
         inertial=Inertial(m, c, I),
         theta=theta,
         covariance=covariance,
         loss_history=tuple(history),
-        iterations=iterations,
+        iterations=len(history) - 1,
         wall_s=time.perf_counter() - t0,
         window_s=windows.window_s,
-        window_count=W,
+        window_count=windows.window_count,
         config=config,
     )
 
@@ -189,45 +138,51 @@ def channel_weights(residual: np.ndarray, count: int) -> np.ndarray:
     return w / count
 
 
+def window_jacobians(rollout: FreeBodyRollout, theta, corr, corr_rate, weight):
+    """Weighted residuals r [W, n] and their Jacobians w.r.t. theta [W, n, 10] and the start corrections
+    [W, n, 12] (each window's own), by central differences batched over windows: they do not interact."""
+    W = rollout.windows.window_count
+    sqrt_w = np.sqrt(weight)[:, None, :]
+    c0 = np.zeros((W, 6)) if corr is None else corr
+    cr0 = np.zeros((W, 6)) if corr_rate is None else corr_rate
+
+    def res(th, c, cr):
+        return (rollout.residuals(th, c, cr) * sqrt_w).transpose(1, 0, 2).reshape(W, -1)
+
+    r0 = res(theta, c0, cr0)
+    eps_theta = 1e-4 * np.maximum(np.abs(theta), 1.0)
+    J_theta = np.zeros((W, r0.shape[1], THETA_SIZE))
+    for k in range(THETA_SIZE):
+        e = np.zeros(THETA_SIZE)
+        e[k] = eps_theta[k]
+        J_theta[:, :, k] = (res(theta + e, c0, cr0) - res(theta - e, c0, cr0)) / (2 * e[k])
+    J_corr = np.zeros((W, r0.shape[1], 12))
+    steps = np.concatenate([CORRECTION_SCALE, CORRECTION_RATE_SCALE]) * 1e-2
+    for k in range(12):
+        e = np.zeros((W, 12))
+        e[:, k] = steps[k]
+        plus = res(theta, c0 + e[:, :6], cr0 + e[:, 6:])
+        minus = res(theta, c0 - e[:, :6], cr0 - e[:, 6:])
+        J_corr[:, :, k] = (plus - minus) / (2 * steps[k])
+    return r0, J_theta, J_corr
+
+
 def window_robust_covariance(rollout: FreeBodyRollout, theta, corr, corr_rate, weight) -> np.ndarray:
     """Covariance of (mass, com, inertia) clustered by window (sandwich estimator).
 
     Within a window the residuals are correlated (integrated sensor noise), so
     sigma^2 (J^T J)^-1 would be too narrow; windows are nearly independent, so
     the per-window scores give an honest spread. Start corrections are profiled
-    out per window; the Jacobians come from central differences, batched over
-    windows because they do not interact.
+    out per window.
     """
-    W = rollout.windows.window_count
-    sqrt_w = np.sqrt(weight)[:, None, :]
-
-    def res(th, c, cr):
-        return (rollout.residuals(th, c, cr) * sqrt_w).transpose(1, 0, 2).reshape(W, -1)  # [W, S*6]
-
-    r0 = res(theta, corr, corr_rate)
-    eps_theta = 1e-4 * np.maximum(np.abs(theta), 1.0)
-    J_theta = np.zeros((W, r0.shape[1], THETA_SIZE))
-    for k in range(THETA_SIZE):
-        e = np.zeros(THETA_SIZE)
-        e[k] = eps_theta[k]
-        J_theta[:, :, k] = (res(theta + e, corr, corr_rate) - res(theta - e, corr, corr_rate)) / (2 * e[k])
-    profile = corr is not None
-    c0 = corr if profile else np.zeros((W, 6))
-    cr0 = corr_rate if profile else np.zeros((W, 6))
-    J_corr = np.zeros((W, r0.shape[1], 12))
-    scales = np.concatenate([CORRECTION_SCALE, CORRECTION_RATE_SCALE]) * 1e-2
-    for k in range(12 if profile else 0):
-        e = np.zeros((W, 12))
-        e[:, k] = scales[k]
-        plus = res(theta, c0 + e[:, :6], cr0 + e[:, 6:])
-        minus = res(theta, c0 - e[:, :6], cr0 - e[:, 6:])
-        J_corr[:, :, k] = (plus - minus) / (2 * scales[k])
+    r0, J_theta, J_corr = window_jacobians(rollout, theta, corr, corr_rate, weight)
+    W = len(r0)
     H = np.zeros((THETA_SIZE, THETA_SIZE))
     scores = np.zeros((W, THETA_SIZE))
     for w in range(W):
         Jc = J_corr[w]
         # project out what the window's own start correction can absorb
-        Jt = J_theta[w] - Jc @ np.linalg.pinv(Jc) @ J_theta[w] if profile else J_theta[w]
+        Jt = J_theta[w] - Jc @ np.linalg.pinv(Jc) @ J_theta[w]
         H += Jt.T @ Jt
         scores[w] = Jt.T @ r0[w]
     H_inv = np.linalg.pinv(H)
@@ -235,3 +190,69 @@ def window_robust_covariance(rollout: FreeBodyRollout, theta, corr, corr_rate, w
     cov_theta = H_inv @ meat @ H_inv
     Jp = physical_jacobian(theta)
     return Jp @ cov_theta @ Jp.T
+
+
+def gauss_newton(rollout, theta, bounds: InertialBounds, config: IdentifyConfig, weight, progress=None):
+    """Levenberg-Marquardt on theta with each window's start correction solved alongside (variable projection).
+
+    Returns theta, corrections, correction rates and the loss history.
+    """
+    W = rollout.windows.window_count
+    corr, rate = np.zeros((W, 6)), np.zeros((W, 6))
+    lam, history = 1e-3, []
+    sqrt_pen = np.sqrt(config.penalty_weight)
+
+    def penalty_residual(th):
+        return sqrt_pen * bounds.violation(flat_physical(th))[0]
+
+    def total_loss(th, c, cr):
+        r = rollout.residuals(th, c, cr) * np.sqrt(weight)[:, None, :]
+        return float(np.sum(r * r) + np.sum(penalty_residual(th) ** 2))
+
+    loss = total_loss(theta, corr, rate)
+    history.append(loss)
+    for it in range(config.max_iterations):
+        # Gradient from the Warp tape through the Newton rollout; Gauss-Newton curvature from
+        # batched central differences (ten parameters, windows independent).
+        _, J_theta, J_corr = window_jacobians(rollout, theta, corr, rate, weight)
+        _, g_theta, g_corr, g_rate = rollout.loss_and_grad(theta, corr, rate, weight, True)
+        g_c = 0.5 * np.concatenate([g_corr, g_rate], axis=1)  # [W, 12]
+        H = np.zeros((THETA_SIZE, THETA_SIZE))
+        g = 0.5 * g_theta
+        solves = []
+        for w in range(W):
+            Hcc = J_corr[w].T @ J_corr[w] + 1e-12 * np.eye(12)
+            Hct = J_corr[w].T @ J_theta[w]
+            Hcc_inv = np.linalg.pinv(Hcc)
+            solves.append((Hcc_inv, Hct))
+            # eliminate the window's correction (Schur complement)
+            H += J_theta[w].T @ J_theta[w] - Hct.T @ Hcc_inv @ Hct
+            g -= Hct.T @ Hcc_inv @ g_c[w]
+        v, dv = bounds.violation(flat_physical(theta))
+        pr = sqrt_pen * v
+        Jp = sqrt_pen * dv[:, None] * physical_jacobian(theta)[:7]
+        H += Jp.T @ Jp
+        g += Jp.T @ pr
+        improved = False
+        for _ in range(10):
+            step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
+            dc = np.stack([-Hcc_inv @ (g_c[w] + Hct @ step) for w, (Hcc_inv, Hct) in enumerate(solves)])
+            new_corr, new_rate = corr + dc[:, :6], rate + dc[:, 6:]
+            new_loss = total_loss(theta + step, new_corr, new_rate)
+            if new_loss < loss:
+                theta, corr, rate, improved = theta + step, new_corr, new_rate, True
+                lam = max(lam / 3, 1e-7)
+                break
+            lam *= 4
+        if not improved:
+            break
+        rel = (loss - new_loss) / max(loss, 1e-300)
+        loss = new_loss
+        history.append(loss)
+        if progress:
+            progress(it + 1, loss)
+        if rel < 1e-7:
+            break
+    return theta, corr, rate, history
+
+
