@@ -23,7 +23,7 @@ import numpy as np
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["ConvexParts", "DecomposeConfig", "DecomposeError", "decompose", "run"]
+__all__ = ["ConvexParts", "DecomposeConfig", "DecomposeError", "decompose"]
 
 _CACHE_FORMAT = 1
 
@@ -131,9 +131,6 @@ def decompose(
         _save(path, parts, volume_union, volume_mesh, stats)
     return ConvexParts(tuple(parts), volume_union, volume_mesh, {**stats, "cache": "miss" if path else "off"})
 
-
-run = decompose
-"""Alias of `decompose` (the stage's `run`)."""
 
 
 def _check(mesh, config: DecomposeConfig) -> None:
