@@ -64,7 +64,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     from assets.materials import material_range
     from exporters import export_all
     from pipelines.decompose import DecomposeConfig, decompose
-    from pipelines.identify import IdentifyConfig, InertialBounds, identify_free_body, identify_least_squares
+    from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
     from pipelines.logs import read_recording
     from pipelines.priors import uniform_density_prior
     from pipelines.validate import validate_exports
@@ -93,44 +93,15 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     prior = timer.run("priors", uniform_density_prior, mesh_object, material)
 
     X_tracked_body = tracked_to_object(trials[0], placement)
-
-    bounds = InertialBounds(prior.lower, prior.upper)
-    ls = timer.run("identify (least squares)", _least_squares, trials, X_tracked_body, identify_least_squares)
-    start = _clip_into_bounds(ls.inertial, prior, bounds)
     id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations)
-    if config.method == "newton":
-        windows = _windows(trials, id_config)
-        progress = _progress_logger(log)
-        result = timer.run(
-            "identify (Newton)", identify_free_body, windows, X_tracked_body, start, bounds, id_config, progress
-        )
-        inertial, covariance, loss_history = result.inertial, result.covariance, result.loss_history
-        method_info = result.provenance()
-    else:
-        inertial, covariance, loss_history = ls.inertial, ls.covariance, ()
-        method_info = {"cutoff_hz": ls.cutoff_hz, "samples": ls.sample_count}
-
-    # With a held-out recording, least squares and the Newton fit compete on predicting it.
-    evaluation = holdout or trials[0]
-    candidates = {"baseline": prior.inertial, "least_squares": ls.inertial}
-    if config.method == "newton":
-        candidates["newton"] = inertial
-    fits, impulse, traces = timer.run("fit quality", _fit_quality, evaluation, X_tracked_body, candidates, id_config)
-    selected = config.method if config.method == "newton" else "least_squares"
-    if holdout is not None and config.method == "newton" and _impulse_score(impulse, "least_squares") < \
-            _impulse_score(impulse, "newton"):
-        selected = "least_squares"
-        inertial, covariance = ls.inertial, ls.covariance
+    held = timer.run(
+        "identify", identify_held, trials, holdout, X_tracked_body, prior.inertial,
+        InertialBounds(prior.lower, prior.upper), id_config, config.method, _progress_logger(log),
+    )
+    if held.selected != config.method and config.method == "newton":
         log("least squares predicts the held-out recording's impulses better than the Newton fit: keeping it")
-    method_info["selected"] = selected
-    method_info["candidates"] = {
-        k: {"mass": v.mass, "com": list(v.com), "inertia": [list(r) for r in v.inertia]} for k, v in candidates.items()
-    }
-    method_info["heldout_fits"] = {k: asdict(v) | {"impulse_rms": impulse[k]} for k, v in fits.items()} \
-        if holdout is not None else None
-    fit_baseline, fit_final = fits["baseline"], fits[selected]
-    traces = {"t_s": traces["t_s"], "measured_position": traces["measured_position"], "window_s": traces["window_s"],
-              "baseline_position": traces["baseline_position"], "final_position": traces[f"{selected}_position"]}
+    inertial, covariance = held.inertial, held.covariance
+    fit_baseline, fit_final = held.fits["baseline"], held.fits[held.selected]
 
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])
@@ -173,7 +144,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             "scan": scan_stats,
             "decompose": parts.stats | {"volume_union_m3": parts.volume_union_m3, "volume_mesh_m3": parts.volume_mesh_m3},
             "prior": prior.provenance(),
-            "identify": {"method": config.method, **method_info},
+            "identify": {"method": config.method, **held.provenance()},
             "tracked_frame_in_object": {"position": list(X_tracked_body.inverse().position),
                                         "quaternion_xyzw": list(X_tracked_body.inverse().quaternion_xyzw)},
             "validation": validation.to_json(),
@@ -183,7 +154,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         write_asset(asset, tmp / "asset.json")
         from twin.report import write_report
 
-        write_report(tmp / "report.html", asset_to_json(asset), loss_history, traces)
+        write_report(tmp / "report.html", asset_to_json(asset), held.loss_history, held.traces)
         _replace_dir(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -214,104 +185,6 @@ def _object_mesh(config: BuildConfig):
             raise BuildError(f"{source}: mesh is not watertight with consistent normals")
         return mesh, source.stem, None, {"mesh_file": str(source)}
     raise BuildError(f"{source}: not a scan directory or a mesh file ({', '.join(MESH_SUFFIXES)})")
-
-
-def tracked_to_object(recording, placement):
-    """The object frame in the tracked frame, from the scan placement and the first still poses.
-
-    The object sits at its placement when the recording starts; poses in the
-    first 0.1 s are averaged when they are still (spread under 1 mm), which
-    beats the tracker's noise.
-    """
-    from scipy.spatial.transform import Rotation
-
-    from assets import Pose
-
-    pose = recording.pose
-    first = pose.t_s <= pose.t_s[0] + 0.1
-    if np.ptp(pose.position[first], axis=0).max() > 1e-3:
-        first = np.zeros(len(pose.t_s), bool)
-        first[0] = True
-    position = pose.position[first].mean(axis=0)
-    rotation = Rotation.from_quat(pose.quat_xyzw[first]).mean()
-    T_world_tracked = Pose(tuple(position), tuple(rotation.as_quat()))
-    return T_world_tracked.inverse() @ placement
-
-
-def _least_squares(trials, X_tracked_body, identify_least_squares):
-    rec = trials[0]
-    return identify_least_squares(
-        rec.pose.t_s, rec.pose.position, rec.pose.quat_xyzw, rec.wrench.t_s, rec.wrench.force, rec.wrench.torque,
-        X_tracked_body,
-    )
-
-
-def _windows(recordings, id_config):
-    from pipelines.identify import concat_windows, make_windows
-
-    return concat_windows(
-        [
-            make_windows(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s, r.wrench.force,
-                         r.wrench.torque, window_s=id_config.window_s, substeps=id_config.substeps)
-            for r in recordings
-        ]
-    )
-
-
-def _clip_into_bounds(inertial, prior, bounds):
-    """The least-squares start moved inside C and made physical, or the prior if it cannot be."""
-    from assets import Inertial
-
-    m = float(np.clip(inertial.mass, bounds.lower[0], bounds.upper[0]))
-    c = np.clip(inertial.com, bounds.lower[1:4], bounds.upper[1:4])
-    I = np.asarray(inertial.inertia) * (m / inertial.mass)
-    candidate = Inertial(m, c, I)
-    d, _ = candidate.principal()
-    if candidate.physical_violation() is not None or d[0] < 1e-3 * d[2]:
-        return prior.inertial
-    return candidate
-
-
-def _fit_quality(recording, X_tracked_body, candidates: dict, id_config):
-    """Windowed replay from measured states for each candidate body.
-
-    Returns FitMetrics per candidate, its momentum-scaled RMS (position, rotation), and position traces.
-    """
-    from assets import FitMetrics
-    from pipelines.identify.inertia import theta_from_physical
-    from pipelines.identify.rollout import FreeBodyRollout
-
-    windows = _windows([recording], id_config)
-    rollout = FreeBodyRollout(windows, X_tracked_body)
-    t = windows.t_start_s[None, :] + windows.dt_s * windows.substeps * np.arange(1, windows.sample_count + 1)[:, None]
-    measured = windows.measured_position[1:]
-    traces = {"t_s": t.T.reshape(-1).tolist(), "measured_position": measured.transpose(1, 0, 2).reshape(-1, 3).tolist(),
-              "window_s": windows.window_s}
-    fits, impulse = {}, {}
-    for label, inertial in candidates.items():
-        theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())
-        scaled = rollout.residuals(theta, momentum_scaled=True)
-        impulse[label] = [float(np.sqrt(np.mean(np.sum(scaled[..., :3] ** 2, -1)))),
-                          float(np.sqrt(np.mean(np.sum(scaled[..., 3:] ** 2, -1))))]
-        r = rollout.residuals(theta, momentum_scaled=False)
-        rp, rr = r[..., :3], r[..., 3:]
-        fits[label] = FitMetrics(
-            rmse_position_m=float(np.sqrt(np.mean(np.sum(rp**2, -1)))),
-            rmse_rotation_rad=float(np.sqrt(np.mean(np.sum(rr**2, -1)))),
-            loss=float(np.mean(np.sum(rp**2, -1) + np.sum(rr**2, -1))),
-        )
-        traces[f"{label}_position"] = (measured + rp).transpose(1, 0, 2).reshape(-1, 3).tolist()
-    return fits, impulse, traces
-
-
-def _impulse_score(impulse: dict, label: str) -> float:
-    """Held-out error in momentum-scaled units (see eval_tracked_pose_error), relative to least squares.
-
-    The plain pose error favours too-large inertia when the wrench is noisy;
-    scaled by each candidate's own mass and inertia it ranks them without that bias.
-    """
-    ref = impulse["least_squares"]
-    return sum((x / max(r, 1e-30)) ** 2 for x, r in zip(impulse[label], ref))
 
 
 def _progress_logger(log):

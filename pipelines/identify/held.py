@@ -1,0 +1,176 @@
+"""The identify stage for a held object: least squares, the Newton fit from it, and held-out selection.
+
+Inputs are recordings as `pipelines.logs` reads them (wrench in world axes
+about the tracked origin), the scan placement and the prior. With a held-out
+recording the two estimates compete on predicting it and the better one is
+kept; without one the Newton fit is kept (`method="newton"`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Callable, Literal
+
+import numpy as np
+
+from assets import FitMetrics, Inertial, Pose
+
+from .free_body import Identification, IdentifyConfig, InertialBounds, identify_free_body
+from .inertia import theta_from_physical
+from .least_squares import LeastSquaresResult, identify_least_squares
+from .rollout import FreeBodyRollout
+from .windows import concat_windows, make_windows
+
+Method = Literal["newton", "ls"]
+
+
+@dataclass(frozen=True)
+class HeldIdentification:
+    """The kept estimate, its covariance over (mass, com xyz, Ixx Iyy Izz Ixy Ixz Iyz), and the evidence.
+
+    candidates: each estimate by name ("baseline" is the prior); fits: windowed
+    replay of the evaluation recording (held-out if given) per candidate;
+    impulse_rms: the same replay's momentum-scaled RMS (position, rotation);
+    traces: positions for the report.
+    """
+
+    inertial: Inertial
+    covariance: np.ndarray
+    selected: str
+    candidates: dict
+    fits: dict
+    impulse_rms: dict
+    traces: dict
+    loss_history: tuple[float, ...]
+    least_squares: LeastSquaresResult
+    newton: Identification | None
+    heldout: bool
+
+    def provenance(self) -> dict:
+        out = {
+            "selected": self.selected,
+            "candidates": {k: {"mass": v.mass, "com": list(v.com), "inertia": [list(r) for r in v.inertia]}
+                           for k, v in self.candidates.items()},
+            "least_squares": {"cutoff_hz": self.least_squares.cutoff_hz, "samples": self.least_squares.sample_count},
+            "newton": self.newton.provenance() if self.newton else None,
+        }
+        fits = {k: asdict(v) | {"impulse_rms": self.impulse_rms[k]} for k, v in self.fits.items()}
+        out["heldout_fits" if self.heldout else "trial_fits"] = fits
+        return out
+
+
+def tracked_to_object(recording, placement: Pose) -> Pose:
+    """The object frame in the tracked frame, from the scan placement and the first still poses.
+
+    The object sits at its placement when the recording starts; poses in the
+    first 0.1 s are averaged when they are still (spread under 1 mm), which
+    beats the tracker's noise.
+    """
+    from scipy.spatial.transform import Rotation
+
+    pose = recording.pose
+    first = pose.t_s <= pose.t_s[0] + 0.1
+    if np.ptp(pose.position[first], axis=0).max() > 1e-3:
+        first = np.zeros(len(pose.t_s), bool)
+        first[0] = True
+    rotation = Rotation.from_quat(pose.quat_xyzw[first]).mean()
+    T_world_tracked = Pose(tuple(pose.position[first].mean(axis=0)), tuple(rotation.as_quat()))
+    return T_world_tracked.inverse() @ placement
+
+
+def identify_held(
+    trials: list,
+    holdout,
+    X_tracked_body: Pose,
+    prior: Inertial,
+    bounds: InertialBounds,
+    config: IdentifyConfig,
+    method: Method = "newton",
+    progress: Callable[[int, float], None] | None = None,
+) -> HeldIdentification:
+    """Identify the held body from `trials` (Recordings); `holdout` (a Recording or None) selects and validates."""
+    rec = trials[0]
+    ls = identify_least_squares(
+        rec.pose.t_s, rec.pose.position, rec.pose.quat_xyzw, rec.wrench.t_s, rec.wrench.force, rec.wrench.torque,
+        X_tracked_body,
+    )
+    candidates = {"baseline": prior, "least_squares": ls.inertial}
+    newton = None
+    if method == "newton":
+        start = _clip_into_bounds(ls.inertial, prior, bounds)
+        newton = identify_free_body(_windows(trials, config), X_tracked_body, start, bounds, config, progress)
+        candidates["newton"] = newton.inertial
+
+    fits, impulse, traces = _replay(holdout or trials[0], X_tracked_body, candidates, config)
+    selected = "newton" if method == "newton" else "least_squares"
+    if holdout is not None and method == "newton" and _impulse_score(impulse, "least_squares") < \
+            _impulse_score(impulse, "newton"):
+        selected = "least_squares"
+    inertial, covariance = (newton.inertial, newton.covariance) if selected == "newton" else (ls.inertial,
+                                                                                              ls.covariance)
+    traces = {"t_s": traces["t_s"], "measured_position": traces["measured_position"], "window_s": traces["window_s"],
+              "baseline_position": traces["baseline_position"], "final_position": traces[f"{selected}_position"]}
+    return HeldIdentification(
+        inertial=inertial, covariance=covariance, selected=selected, candidates=candidates, fits=fits,
+        impulse_rms=impulse, traces=traces, loss_history=newton.loss_history if newton else (), least_squares=ls,
+        newton=newton, heldout=holdout is not None,
+    )
+
+
+def _windows(recordings, config: IdentifyConfig):
+    return concat_windows(
+        [
+            make_windows(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s, r.wrench.force,
+                         r.wrench.torque, window_s=config.window_s, substeps=config.substeps)
+            for r in recordings
+        ]
+    )
+
+
+def _clip_into_bounds(inertial: Inertial, prior: Inertial, bounds: InertialBounds) -> Inertial:
+    """The least-squares estimate moved inside C and made physical, or the prior if it cannot be."""
+    m = float(np.clip(inertial.mass, bounds.lower[0], bounds.upper[0]))
+    c = np.clip(inertial.com, bounds.lower[1:4], bounds.upper[1:4])
+    candidate = Inertial(m, c, np.asarray(inertial.inertia) * (m / inertial.mass))
+    d, _ = candidate.principal()
+    if candidate.physical_violation() is not None or d[0] < 1e-3 * d[2]:
+        return prior
+    return candidate
+
+
+def _replay(recording, X_tracked_body: Pose, candidates: dict, config: IdentifyConfig):
+    """Windowed replay from measured states for each candidate body.
+
+    Returns FitMetrics per candidate, its momentum-scaled RMS (position, rotation), and position traces.
+    """
+    windows = _windows([recording], config)
+    rollout = FreeBodyRollout(windows, X_tracked_body, device=config.device)
+    t = windows.t_start_s[None, :] + windows.dt_s * windows.substeps * np.arange(1, windows.sample_count + 1)[:, None]
+    measured = windows.measured_position[1:]
+    traces = {"t_s": t.T.reshape(-1).tolist(), "measured_position": measured.transpose(1, 0, 2).reshape(-1, 3).tolist(),
+              "window_s": windows.window_s}
+    fits, impulse = {}, {}
+    for label, inertial in candidates.items():
+        theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())
+        scaled = rollout.residuals(theta, momentum_scaled=True)
+        impulse[label] = [float(np.sqrt(np.mean(np.sum(scaled[..., :3] ** 2, -1)))),
+                          float(np.sqrt(np.mean(np.sum(scaled[..., 3:] ** 2, -1))))]
+        r = rollout.residuals(theta, momentum_scaled=False)
+        rp, rr = r[..., :3], r[..., 3:]
+        fits[label] = FitMetrics(
+            rmse_position_m=float(np.sqrt(np.mean(np.sum(rp**2, -1)))),
+            rmse_rotation_rad=float(np.sqrt(np.mean(np.sum(rr**2, -1)))),
+            loss=float(np.mean(np.sum(rp**2, -1) + np.sum(rr**2, -1))),
+        )
+        traces[f"{label}_position"] = (measured + rp).transpose(1, 0, 2).reshape(-1, 3).tolist()
+    return fits, impulse, traces
+
+
+def _impulse_score(impulse: dict, label: str) -> float:
+    """Held-out error in momentum-scaled units (see eval_tracked_pose_error), relative to least squares.
+
+    The plain pose error favours too-large inertia when the wrench is noisy;
+    scaled by each candidate's own mass and inertia it ranks them without that bias.
+    """
+    ref = impulse["least_squares"]
+    return sum((x / max(r, 1e-30)) ** 2 for x, r in zip(impulse[label], ref))
