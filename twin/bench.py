@@ -72,3 +72,104 @@ def bench_sample(sample: Path, methods: tuple[str, ...] = ("newton", "ls")) -> l
         print(f"{r['method']:8} {r['run']:5} {r['estimate']:14} {r['wall_s']:7.1f} {r['mass_error_pct']:+7.2f} {pm:>24} "
               f"{r['com_error_mm']:7.3f} {r['volume_error_pct']:+8.2f} {r['heldout_rmse_position_mm']:11.3f}")
     return rows
+
+
+# RigPI (Table I): relative errors of mass and of Ixx, Iyy, Izz [%] on its free objects.
+RIGPI_FREE = {"cube": (1.5, (8.6, 6.4, 7.1)), "sphere": (3.5, (7.4, 4.2, 8.2)), "apple": (1.7, (13.9, 6.6, 12.3))}
+
+
+def paper_objects() -> dict:
+    """Synthetic analogues of RigPI's free objects (truth in notes/anchors.md): mesh [m] and mass [kg].
+
+    The apple is an ellipsoid of revolution whose moments match the paper's
+    (1.22e-5, 1.22e-5, 1.12e-5 kg m^2 at 41.6 g): semi-axes 25.9, 25.9, 28.2 mm.
+    """
+    import trimesh
+
+    apple = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+    apple.apply_scale((0.0259, 0.0259, 0.0282))
+    return {
+        "cube": (trimesh.creation.box((0.04, 0.04, 0.04)), 0.02),
+        "sphere": (trimesh.creation.icosphere(subdivisions=4, radius=0.025), 0.02),
+        "apple": (apple, 0.0416),
+    }
+
+
+def bench_paper(seeds: int = 5, duration_s: float = 10.0) -> list[dict]:
+    """Each paper object held and moved for `duration_s`, recorded with `seeds` noise draws at the ATI
+    sensor's resolution; identified through the MCAP files like a build; errors and spread per estimator."""
+    from assets import Inertial, Pose
+    from assets.materials import material_range
+    from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
+    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from pipelines.priors import uniform_density_prior
+    from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
+    from pipelines.synth.recording import write_recording
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for k, (name, (mesh, mass)) in enumerate(paper_objects().items()):
+            mesh = mesh.copy()
+            mesh.density = mass / mesh.volume
+            truth = Inertial(mass, (0.0, 0.0, 0.0), mesh.moment_inertia)
+            half_height = 0.5 * (mesh.bounds[1, 2] - mesh.bounds[0, 2])
+            placement = Pose((0.5, 0.0, half_height))
+            grasp = Pose((0.0, 0.0, half_height), (1.0, 0.0, 0.0, 0.0))
+            prior = uniform_density_prior(mesh.copy(), material_range(None))
+            bounds = InertialBounds(prior.lower, prior.upper)
+            motion_rng = np.random.default_rng(1000 + k)
+            config = HeldMotionConfig(duration_s=duration_s)
+            motions = {trial: simulate_held(truth, placement, grasp, config, motion_rng) for trial in ("trial", "heldout")}
+            estimates = {"least_squares": [], "newton": [], "kept": []}
+            for seed in range(seeds):
+                noise_rng = np.random.default_rng(seed)
+                recordings = {}
+                for trial, motion in motions.items():
+                    t_pose, position, quat, t_wrench, force, torque = measure(motion, SensorNoise(), noise_rng)
+                    path = tmp / f"{name}-{seed}-{trial}.mcap"
+                    write_recording(path, pose=PoseTrack(t_pose, position, quat, "world", "gripper", "/tracker/pose"),
+                                    wrench=WrenchTrack(t_wrench, force, torque, "/ft_sensor/wrench", "gripper"))
+                    recordings[trial] = read_recording(path)
+                X = tracked_to_object(recordings["trial"], placement)
+                held = identify_held([recordings["trial"]], recordings["heldout"], X, prior.inertial, bounds,
+                                     IdentifyConfig())
+                estimates["least_squares"].append(held.candidates["least_squares"])
+                estimates["newton"].append(held.candidates["newton"])
+                estimates["kept"].append(held.inertial)
+            for estimator, values in estimates.items():
+                rows.append({"object": name, "estimator": estimator, **_spread(values, truth)})
+    _print_paper_table(rows)
+    return rows
+
+
+def _spread(values, truth) -> dict:
+    """Mean absolute and worst relative errors [%], COM error [mm] and coefficient of variation [%]."""
+    masses = np.array([v.mass for v in values])
+    principal = np.array([np.linalg.eigvalsh(v.inertia_matrix()) for v in values])
+    true_principal = np.linalg.eigvalsh(truth.inertia_matrix())
+    mass_err = 100 * (masses / truth.mass - 1)
+    inertia_err = 100 * (principal / true_principal - 1)
+    com_err = np.array([1000 * np.linalg.norm(np.asarray(v.com) - truth.com) for v in values])
+    return {
+        "mass_error_pct": float(np.mean(np.abs(mass_err))),
+        "mass_error_max_pct": float(np.max(np.abs(mass_err))),
+        "inertia_error_pct": np.mean(np.abs(inertia_err), axis=0).tolist(),
+        "inertia_error_max_pct": float(np.max(np.abs(inertia_err))),
+        "com_error_max_mm": float(com_err.max()),
+        "mass_cv_pct": float(100 * masses.std() / masses.mean()),
+        "inertia_cv_pct": float(np.max(100 * principal.std(axis=0) / principal.mean(axis=0))),
+    }
+
+
+def _print_paper_table(rows: list[dict]) -> None:
+    print(f"{'object':7} {'estimator':14} {'mass %':>7} {'max':>6} {'principal moments % (mean |err|)':>33} "
+          f"{'max':>6} {'COM mm':>7} {'CV m %':>7} {'CV I %':>7}")
+    for r in rows:
+        pm = " ".join(f"{x:6.2f}" for x in r["inertia_error_pct"])
+        print(f"{r['object']:7} {r['estimator']:14} {r['mass_error_pct']:7.2f} {r['mass_error_max_pct']:6.2f} "
+              f"{pm:>33} {r['inertia_error_max_pct']:6.2f} {r['com_error_max_mm']:7.3f} {r['mass_cv_pct']:7.2f} "
+              f"{r['inertia_cv_pct']:7.2f}")
+    for name, (m, inertia) in RIGPI_FREE.items():
+        pm = " ".join(f"{x:6.2f}" for x in inertia)
+        print(f"{name:7} {'RigPI (paper)':14} {m:7.2f} {'':>6} {pm:>33} {'':>6} {'':>7} {'5.6-12.5':>7} {'11-22':>7}")

@@ -51,12 +51,18 @@ class Synth:
 
 @dataclass(frozen=True)
 class Bench:
-    """Benchmarks that print a table. sample: cold and warm builds of a synthetic sample against its truth."""
+    """Benchmarks that print a table.
 
-    what: tyro.conf.Positional[Literal["sample"]]
+    sample: cold and warm builds of a synthetic sample against its truth.
+    paper: RigPI's cube, sphere and apple, held and moved, several noise draws each.
+    """
+
+    what: tyro.conf.Positional[Literal["sample", "paper"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
+    seeds: int = 5
+    """Noise draws per object (paper)."""
 
 
 def _log(message: str) -> None:
@@ -103,9 +109,12 @@ def main(argv: list[str] | None = None) -> int:
         elif isinstance(command, Synth):
             _run_synth(command)
         else:
-            from twin.bench import bench_sample
+            from twin import bench
 
-            bench_sample(command.sample, command.methods)
+            if command.what == "sample":
+                bench.bench_sample(command.sample, command.methods)
+            else:
+                bench.bench_paper(command.seeds)
     except (ValueError, RuntimeError, OSError) as exc:
         print(f"twin: error: {exc}", file=sys.stderr)
         return 1
