@@ -109,12 +109,14 @@ def main(argv: list[str] | None = None) -> int:
         elif isinstance(command, Synth):
             _run_synth(command)
         else:
-            from twin import bench
-
             if command.what == "sample":
-                bench.bench_sample(command.sample, command.methods)
+                from twin.bench.sample import bench_sample
+
+                bench_sample(command.sample, command.methods)
             else:
-                bench.bench_paper(command.seeds)
+                from twin.bench.paper import bench_paper
+
+                bench_paper(command.seeds)
     except (ValueError, RuntimeError, OSError) as exc:
         print(f"twin: error: {exc}", file=sys.stderr)
         return 1
