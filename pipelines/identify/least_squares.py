@@ -21,6 +21,7 @@ import numpy as np
 
 from assets import Inertial, Pose
 
+from .noise import estimate_noise_levels
 from .windows import lowpass, smoothed_pose_grid
 
 GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
@@ -56,10 +57,15 @@ def _inertia_operator(v: np.ndarray) -> np.ndarray:
 
 def identify_least_squares(
     pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque,
-    X_tracked_body: Pose, *, cutoff_hz: float = 12.0, t_begin_s: float | None = None,
-    force_sigma_n: float = 1 / 80, torque_sigma_nm: float = 1 / 2000,
+    X_tracked_body: Pose, *, cutoff_hz: float = 12.0, t_begin_s: float | None = None, block_s: float = 0.1,
 ) -> LeastSquaresResult:
-    """Fit pi by weighted least squares; wrench in world axes about the tracked origin."""
+    """Fit pi by weighted least squares; wrench in world axes about the tracked origin.
+
+    Force and torque rows are weighted by their noise levels, estimated from
+    the recording. The covariance is a sandwich over blocks of `block_s`
+    (filtered noise is correlated within a block, nearly independent across).
+    """
+    noise = estimate_noise_levels(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque)
     t, pos_f, rot_f = smoothed_pose_grid(pose_t_s, np.asarray(pose_position), np.asarray(pose_quat_xyzw), cutoff_hz)
     dt = t[1] - t[0]
     rate = 1.0 / dt
@@ -92,15 +98,16 @@ def identify_least_squares(
     A[:, 3:, 1:4] = -_skew(a_g)
     A[:, 3:, 4:] = _inertia_operator(al_b) + Sw @ _inertia_operator(w_b)
     b = np.concatenate([f_b, tau_b], axis=1)
-    scale = np.array([1 / force_sigma_n] * 3 + [1 / torque_sigma_nm] * 3)
+    scale = np.array([1 / noise.force_n] * 3 + [1 / noise.torque_nm] * 3)
     As = (A * scale[None, :, None]).reshape(-1, 10)
     bs = (b * scale).reshape(-1)
     pi, *_ = np.linalg.lstsq(As, bs, rcond=None)
-    res = bs - As @ pi
-    # filtered noise is correlated over ~1/(2 cutoff): count independent samples accordingly
-    dof = max(len(bs) * min(1.0, 2 * cutoff_hz / rate) - 10, 1)
-    sigma2 = float(res @ res) / dof
-    cov_pi = sigma2 * np.linalg.pinv(As.T @ As) * (len(bs) / max(len(bs) * min(1.0, 2 * cutoff_hz / rate), 1))
+    rows_per_block = 6 * max(1, int(round(block_s * rate)))
+    scores = (As * (bs - As @ pi)[:, None])
+    blocks = np.add.reduceat(scores, np.arange(0, len(bs), rows_per_block), axis=0)
+    H_inv = np.linalg.pinv(As.T @ As)
+    B = len(blocks)
+    cov_pi = H_inv @ (blocks.T @ blocks * B / max(B - 10, 1)) @ H_inv
 
     inertial, J = _object_frame(pi, X_tracked_body)
     return LeastSquaresResult(inertial, J @ cov_pi @ J.T, cutoff_hz, n)

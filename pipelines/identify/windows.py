@@ -50,6 +50,7 @@ def uniform_pose_grid(t_s, position, quat_xyzw) -> tuple[np.ndarray, np.ndarray,
     t_s = np.asarray(t_s, dtype=float)
     period = float(np.median(np.diff(t_s)))
     grid = t_s[0] + period * np.arange(int(np.floor((t_s[-1] - t_s[0]) / period + 1e-6)) + 1)
+    grid = np.minimum(grid, t_s[-1])  # rounding may put the last point a hair past the data
     pos = np.stack([np.interp(grid, t_s, position[:, k]) for k in range(3)], axis=1)
     rot = Slerp(t_s, Rotation.from_quat(quat_xyzw))(grid)
     return grid, pos, rot

@@ -68,17 +68,23 @@ def bench_paper(seeds: int = 5, duration_s: float = 10.0) -> list[dict]:
                 X = tracked_to_object(recordings["trial"], placement)
                 held = identify_held([recordings["trial"]], recordings["heldout"], X, prior.inertial, bounds,
                                      IdentifyConfig())
-                estimates["least_squares"].append(held.candidates["least_squares"])
-                estimates["newton"].append(held.candidates["newton"])
-                estimates["kept"].append(held.inertial)
+                estimates["least_squares"].append((held.least_squares.inertial, held.least_squares.covariance))
+                estimates["newton"].append((held.newton.inertial, held.newton.covariance))
+                estimates["kept"].append((held.inertial, held.covariance))
             for estimator, values in estimates.items():
                 rows.append({"object": name, "estimator": estimator, **_spread(values, truth)})
     _print_paper_table(rows)
     return rows
 
 
-def _spread(values, truth) -> dict:
-    """Mean absolute and worst relative errors [%], COM error [mm] and coefficient of variation [%]."""
+def _spread(estimates, truth) -> dict:
+    """Mean absolute and worst relative errors [%], COM error [mm], coefficient of variation [%], and how
+    often the reported 95 % intervals of mass and Ixx, Iyy, Izz contain the truth."""
+    values = [inertial for inertial, _ in estimates]
+    flat = np.array([[v.mass, *np.diag(v.inertia_matrix())] for v in values])
+    std = np.array([np.sqrt(np.maximum(np.diag(cov)[[0, 4, 5, 6]], 0)) for _, cov in estimates])
+    true_flat = np.array([truth.mass, *np.diag(truth.inertia_matrix())])
+    covered = np.abs(flat - true_flat) <= 1.96 * std
     masses = np.array([v.mass for v in values])
     principal = np.array([np.linalg.eigvalsh(v.inertia_matrix()) for v in values])
     true_principal = np.linalg.eigvalsh(truth.inertia_matrix())
@@ -93,17 +99,18 @@ def _spread(values, truth) -> dict:
         "com_error_max_mm": float(com_err.max()),
         "mass_cv_pct": float(100 * masses.std() / masses.mean()),
         "inertia_cv_pct": float(np.max(100 * principal.std(axis=0) / principal.mean(axis=0))),
+        "interval_coverage": float(covered.mean()),
     }
 
 
 def _print_paper_table(rows: list[dict]) -> None:
     print(f"{'object':7} {'estimator':14} {'mass %':>7} {'max':>6} {'principal moments % (mean |err|)':>33} "
-          f"{'max':>6} {'COM mm':>7} {'CV m %':>7} {'CV I %':>7}")
+          f"{'max':>6} {'COM mm':>7} {'CV m %':>7} {'CV I %':>7} {'95% cover':>9}")
     for r in rows:
         pm = " ".join(f"{x:6.2f}" for x in r["inertia_error_pct"])
         print(f"{r['object']:7} {r['estimator']:14} {r['mass_error_pct']:7.2f} {r['mass_error_max_pct']:6.2f} "
               f"{pm:>33} {r['inertia_error_max_pct']:6.2f} {r['com_error_max_mm']:7.3f} {r['mass_cv_pct']:7.2f} "
-              f"{r['inertia_cv_pct']:7.2f}")
+              f"{r['inertia_cv_pct']:7.2f} {r['interval_coverage']:9.2f}")
     for name, (m, inertia) in RIGPI_FREE.items():
         pm = " ".join(f"{x:6.2f}" for x in inertia)
         print(f"{name:7} {'RigPI (paper)':14} {m:7.2f} {'':>6} {pm:>33} {'':>6} {'':>7} {'5.6-12.5':>7} {'11-22':>7}")

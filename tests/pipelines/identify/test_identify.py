@@ -78,3 +78,19 @@ def test_newton_recovers_mass_from_a_far_guess(recording):
     np.testing.assert_allclose(np.diag(result.inertial.inertia_matrix()), np.diag(INERTIA), rtol=0.05)
     assert result.loss_history[-1] < result.loss_history[0]
     assert np.all(result.std > 0)
+
+
+def test_noise_levels_are_read_from_the_recording():
+    """Tracker and wrench noise estimated from the data land within 10 % of what the sensors were given."""
+    from pipelines.identify.noise import estimate_noise_levels
+
+    truth = Inertial(MASS, (0.0, 0.0, 0.0), INERTIA)
+    motion = simulate_held(truth, Pose((0.5, 0.0, 0.02)), GRASP, HeldMotionConfig(duration_s=2.0, substeps=2),
+                           np.random.default_rng(5))
+    noise = SensorNoise(force_resolution_n=0.0, torque_resolution_nm=0.0)
+    tp, pos, quat, tw, f, tq = measure(motion, noise, np.random.default_rng(1))
+    levels = estimate_noise_levels(tp, pos, quat, tw, f, tq)
+    assert levels.position_m == pytest.approx(noise.position_sigma_m, rel=0.1)
+    assert levels.rotation_rad == pytest.approx(noise.rotation_sigma_rad, rel=0.1)
+    assert levels.force_n == pytest.approx(noise.force_sigma_n, rel=0.1)
+    assert levels.torque_nm == pytest.approx(noise.torque_sigma_nm, rel=0.1)
