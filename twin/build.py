@@ -38,6 +38,8 @@ class BuildConfig:
     window_s: float = 0.1
     max_iterations: int = 30
     cache_dir: Path = Path.home() / ".cache" / "twin"
+    vlm: str | None = None
+    vlm_model: str | None = None
 
 
 @dataclass
@@ -66,13 +68,15 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     from pipelines.decompose import DecomposeConfig, decompose
     from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
     from pipelines.logs import read_recording
-    from pipelines.priors import uniform_density_prior
+    from pipelines.priors import VlmConfig, ask_vlm, describe_object, estimate_prior, scan_image
     from pipelines.validate import validate_exports
 
     t_start = time.perf_counter()
     timer = StageTimer(log)
     if not config.logs:
         raise BuildError("no recording given: pass --logs TRIAL.mcap")
+    if config.vlm and not config.vlm_model:
+        raise BuildError(f"--vlm {config.vlm} needs --vlm-model NAME")
     for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
         if not Path(path).is_file():
             raise BuildError(f"{path}: recording not found")
@@ -89,8 +93,15 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     parts = timer.run(
         "decompose", decompose, mesh_object, DecomposeConfig(), cache_dir=Path(config.cache_dir) / "coacd"
     )
-    material = material_range(config.material or hint)
-    prior = timer.run("priors", uniform_density_prior, mesh_object, material)
+    named = config.material or hint
+    guess = None
+    if config.vlm:  # any failure is a warning and None: the build goes on with the offline prior
+        vlm = VlmConfig(url=config.vlm, model=config.vlm_model, cache_dir=Path(config.cache_dir) / "vlm")
+        guess = timer.run("vlm", ask_vlm, vlm, scan_image(config.source), describe_object(mesh_object, name, named))
+        log(f"VLM: {guess.material}, {guess.mass_kg} kg, confidence {guess.confidence}" if guess else
+            "VLM: no usable answer; using the offline prior")
+    prior = timer.run("priors", estimate_prior, mesh_object, material_range(named) if named else None, guess)
+    material = prior.material
 
     X_tracked_body = tracked_to_object(trials[0], placement)
     id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations)
@@ -111,8 +122,8 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         com=Estimate(inertial.com, tuple(std[1:4]), interval95=ci(inertial.com, std[1:4])),
         inertia=Estimate(inertial.inertia, inertia_std, interval95=ci(inertial.inertia, inertia_std)),
         friction=Estimate(
-            material.friction, (material.friction_high - material.friction_low) / 4, source="prior",
-            interval95=(material.friction_low, material.friction_high),
+            prior.friction[0], (prior.friction[2] - prior.friction[1]) / 4, source="prior",
+            interval95=(prior.friction[1], prior.friction[2]),
         ),
     )
 
@@ -133,7 +144,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             placement=placement,
             theta=theta,
             geometry=Geometry("meshes/visual.obj", tuple(collision)),
-            material=Material(material.name, float(inertial.mass / mesh_object.volume), material.friction),
+            material=Material(material.name, float(inertial.mass / mesh_object.volume), prior.friction[0]),
             fit=Fit(fit_baseline, fit_final, id_config.window_s),
         )
         paths = timer.run("export", export_all, asset, tmp)

@@ -33,6 +33,11 @@ class Build:
     """Shooting-window length [s]."""
     max_iterations: int = 30
     """Levenberg-Marquardt iterations of the Newton fit."""
+    vlm: str | None = None
+    """OpenAI-compatible server asked for the material (e.g. http://127.0.0.1:8000/v1); key from TWIN_VLM_API_KEY.
+    Any failure falls back to the offline prior."""
+    vlm_model: str | None = None
+    """Model name on the --vlm server (an image-capable one)."""
 
 
 @dataclass(frozen=True)
@@ -55,9 +60,10 @@ class Bench:
 
     sample: cold and warm builds of a synthetic sample against its truth.
     paper: RigPI's cube, sphere and apple, held and moved, several noise draws each.
+    priors: RigPI's six objects: prior error (library, the paper's VLM answers, fusion) and whether C holds the truth.
     """
 
-    what: tyro.conf.Positional[Literal["sample", "paper"]]
+    what: tyro.conf.Positional[Literal["sample", "paper", "priors"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -76,6 +82,7 @@ def _run_build(args: Build) -> None:
         BuildConfig(
             source=args.source, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
             name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
+            vlm=args.vlm, vlm_model=args.vlm_model,
         ),
         log=_log,
     )
@@ -113,6 +120,10 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.sample import bench_sample
 
                 bench_sample(command.sample, command.methods)
+            elif command.what == "priors":
+                from twin.bench.priors import bench_priors
+
+                bench_priors()
             else:
                 from twin.bench.paper import bench_paper
 

@@ -54,6 +54,8 @@ class VlmConfig:
     """Per attempt: connecting and each read [s]."""
     retries: int = 2
     """Further attempts after a timeout, connection failure, HTTP 429 or 5xx."""
+    deadline_s: float = 120.0
+    """No attempt starts after this many seconds, and none runs past it [s]."""
     backoff_s: float = 1.0
     """Wait before the first retry [s]; doubles each time."""
     cache_dir: Path | None = Path.home() / ".cache" / "twin" / "vlm"
@@ -203,12 +205,18 @@ def _post(config: VlmConfig, body: dict) -> dict:
     opener = urllib.request.build_opener(*handlers)
     data = json.dumps(body).encode()
     last = "no attempt"
+    t_end = time.monotonic() + config.deadline_s
+    attempts = 0
     for attempt in range(config.retries + 1):
         if attempt:
-            time.sleep(config.backoff_s * 2 ** (attempt - 1))
+            time.sleep(min(config.backoff_s * 2 ** (attempt - 1), max(t_end - time.monotonic(), 0.0)))
+        timeout = min(config.timeout_s, t_end - time.monotonic())
+        if timeout <= 0:
+            break
+        attempts += 1
         try:
             request = urllib.request.Request(url, data=data, headers=headers, method="POST")
-            with opener.open(request, timeout=config.timeout_s) as response:
+            with opener.open(request, timeout=timeout) as response:
                 raw = response.read()
         except urllib.error.HTTPError as exc:
             detail = exc.read()[:200].decode(errors="replace") if exc.fp else ""
@@ -217,11 +225,11 @@ def _post(config: VlmConfig, body: dict) -> dict:
                 continue
             raise VlmError(last) from exc
         except (TimeoutError, socket.timeout) as exc:
-            last = f"no answer within {config.timeout_s:g} s ({exc})"
+            last = f"no answer within {timeout:.3g} s ({exc})"
             continue
         except (urllib.error.URLError, ConnectionError, OSError) as exc:
             reason = getattr(exc, "reason", exc)
-            last = (f"no answer within {config.timeout_s:g} s" if isinstance(reason, (TimeoutError, socket.timeout))
+            last = (f"no answer within {timeout:.3g} s" if isinstance(reason, (TimeoutError, socket.timeout))
                     else f"cannot reach the server ({reason})")
             continue
         try:
@@ -231,7 +239,7 @@ def _post(config: VlmConfig, body: dict) -> dict:
         if not isinstance(reply, dict):
             raise VlmError("the reply is not a JSON object")
         return reply
-    raise VlmError(f"{last} after {config.retries + 1} attempt(s)")
+    raise VlmError(f"{last} after {attempts} attempt(s)")
 
 
 def _message_content(reply: dict) -> str:

@@ -166,6 +166,18 @@ def test_retries_then_gives_up_on_a_server_error(server, image, cube, tmp_path):
     assert len(server.requests) == n + 2
 
 
+def test_deadline_bounds_the_time_spent_on_a_slow_server(server, image, cube, tmp_path, caplog):
+    """With a 0.8 s deadline a server answering in 1.5 s costs at most two attempts and under a second."""
+    config = _config(server, "slow", tmp_path, deadline_s=0.8)
+    config = VlmConfig(**{**config.__dict__, "retries": 5})
+    n = len(server.requests)
+    t0 = time.perf_counter()
+    with caplog.at_level(logging.WARNING, logger="pipelines.priors.vlm"):
+        assert ask_vlm(config, image, describe_object(cube)) is None
+    assert time.perf_counter() - t0 < 1.2 and len(server.requests) - n <= 2
+    assert "no answer within" in caplog.text
+
+
 def test_absent_server_and_missing_image_degrade_with_a_warning(image, cube, tmp_path, caplog):
     """No server listening, or no image (a mesh source), gives None and a warning naming the cause."""
     with socket.socket() as s:
@@ -217,3 +229,17 @@ def test_scan_image_picks_the_middle_frame(tmp_path, cube):
     mesh_path = tmp_path / "cube.stl"
     cube.export(mesh_path)
     assert scan_image(mesh_path) is None
+
+
+def test_build_goes_on_when_the_vlm_refuses(server, tmp_path):
+    """`twin build --vlm` against a refusing model writes the asset from the offline prior."""
+    from twin.build import BuildConfig, build
+
+    sample = Path(__file__).resolve().parents[2] / "samples" / "cube"
+    url = f"http://127.0.0.1:{server.server_address[1]}/v1"
+    lines = []
+    out = build(BuildConfig(source=sample / "scan", logs=(sample / "trial.mcap",), output=tmp_path / "out",
+                            method="ls", vlm=url, vlm_model="refusal"), log=lines.append)
+    prior = json.loads((out / "asset.json").read_text())["provenance"]["prior"]
+    assert prior["material"] == "pla_printed" and prior["fusion"]["vlm"] is None
+    assert "VLM: no usable answer; using the offline prior" in lines
