@@ -8,8 +8,10 @@ it is asymmetric). A fill is a body of moments M (geometry.py), so its mass is
 rho V_M and its inertia rho J_M: the prior of log mass is a mixture of shifted
 copies of the density's.
 
-A VLM answer is a likelihood on the mass, log-normal around its guess (or its
-density times the volume of the fill it names) with a spread that grows as its
+A VLM answer is a likelihood on the mass around its guess (or its density
+times the volume of the fill it names), in log space a Student-t (log-normal
+as its degrees of freedom grow: heavy tails so that one answer 300 % off, as
+RigPI's were, cannot drag the prior far) with a spread that grows as its
 stated confidence falls; where it names a fill other than the material's, that
 fill joins the mixture with a weight that grows with its confidence. The
 posterior is their product, evaluated on a grid of log density for every fill:
@@ -54,11 +56,13 @@ class PriorConfig:
     vlm_sigma: float = 0.8
     """Spread of a VLM's mass guess in log space at confidence 0.8: RigPI's VLM answers were 12-300 % off
     in mass (log errors 0.11-1.39); it grows as 1/sqrt(confidence) below that."""
+    vlm_tail_dof: float = 4.0
+    """Degrees of freedom of the VLM likelihood in log mass (Student-t); float('inf') makes it log-normal."""
     vlm_friction_sigma: float = 0.4
     """Spread of a VLM's friction guess in log space at confidence 0.8."""
     vlm_structure_weight: float = 0.5
     """Weight, at confidence 1, of a fill the VLM names that differs from the material's (scaled by confidence)."""
-    resolution: int = 64
+    resolution: int = 48
     """Cells of the signed-distance grid along the mesh's longest side (non-convex meshes)."""
     grid_points: int = 801
     """Points of the log-density grid."""
@@ -110,10 +114,12 @@ def estimate_prior(mesh_object, material: MaterialRange | str | None = None, gue
         mass_v, how = _vlm_mass(guess, solid, inner, bodies, material, config)
         if mass_v is not None:
             sigma_v = config.vlm_sigma * np.sqrt(0.8 / np.clip(guess.confidence, 0.2, 1.0))
-            post_w = prior_w * np.exp(-0.5 * ((log_mass - np.log(mass_v)) / sigma_v) ** 2)
+            r2 = ((log_mass - np.log(mass_v)) / sigma_v) ** 2
+            nu = config.vlm_tail_dof
+            post_w = prior_w * (np.exp(-0.5 * r2) if np.isinf(nu) else (1 + r2 / nu) ** (-(nu + 1) / 2))
             if post_w.sum() <= 1e-300:  # the guess lies far outside the geometry's support
                 post_w = prior_w
-            vlm_record = {"mass_kg": mass_v, "from": how, "sigma_log": float(sigma_v)}
+            vlm_record = {"mass_kg": mass_v, "from": how, "sigma_log": float(sigma_v), "tail_dof": nu}
         vlm_record = {"answer": guess.to_json(), **(vlm_record or {"used": False})}
 
     lo_p, hi_p = (1 - config.credible) / 2, (1 + config.credible) / 2

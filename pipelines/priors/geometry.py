@@ -111,13 +111,14 @@ class BodyMoments:
 
 def moments_from_mesh(mesh) -> BodyMoments:
     """Moments of a closed, outward-oriented triangle mesh (trimesh) per unit density."""
-    volume = float(mesh.volume)
+    from trimesh.triangles import mass_properties
+
+    props = mass_properties(np.asarray(mesh.triangles), density=1.0)
+    volume = float(props["volume"])
     if volume <= 0:
         return BodyMoments.zero()
-    mesh = mesh.copy()
-    mesh.density = 1.0
-    c = np.asarray(mesh.center_mass, dtype=float)
-    I = np.asarray(mesh.moment_inertia, dtype=float)
+    c = np.asarray(props["center_mass"], dtype=float)
+    I = np.asarray(props["inertia"], dtype=float)
     S_c = 0.5 * np.trace(I) * np.eye(3) - I
     return BodyMoments(volume, volume * c, S_c + volume * np.outer(c, c))
 
@@ -129,7 +130,7 @@ def solid_moments(mesh_object) -> BodyMoments:
     return moments_from_mesh(mesh_object)
 
 
-def inner_moments(mesh_object, thicknesses_m, resolution: int = 64) -> list[BodyMoments]:
+def inner_moments(mesh_object, thicknesses_m, resolution: int = 48) -> list[BodyMoments]:
     """Moments of the inner bodies: the mesh offset inward by each thickness [m] (zero where none is left).
 
     Convex meshes are offset exactly; others through a signed-distance grid with

@@ -188,3 +188,13 @@ def test_friction_fused_with_the_vlm_guess():
     assert 0.6 < fused.friction[0] < rubber.friction
     assert fused.friction[2] - fused.friction[1] < rubber.friction_high - rubber.friction_low
     assert fused.friction_kinetic[0] < rubber.kinetic()[0]
+
+
+def test_a_wildly_wrong_guess_is_discounted_by_the_heavy_tailed_likelihood():
+    """A guess 30x too heavy drags theta0 less under the Student-t likelihood than under a log-normal one."""
+    cube = trimesh.creation.box((0.04, 0.04, 0.04))
+    guess = VlmGuess(mass_kg=0.6, confidence=0.8)
+    robust = estimate_prior(cube, "pla_printed", guess).inertial.mass
+    gaussian = estimate_prior(cube, "pla_printed", guess, PriorConfig(vlm_tail_dof=float("inf"))).inertial.mass
+    offline = estimate_prior(cube, "pla_printed").inertial.mass
+    assert offline < robust < gaussian and robust < 1.5 * offline
