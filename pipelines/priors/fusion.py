@@ -119,7 +119,8 @@ def estimate_prior(mesh_object, material: MaterialRange | str | None = None, gue
             post_w = prior_w * (np.exp(-0.5 * r2) if np.isinf(nu) else (1 + r2 / nu) ** (-(nu + 1) / 2))
             if post_w.sum() <= 1e-300:  # the guess lies far outside the geometry's support
                 post_w = prior_w
-            vlm_record = {"mass_kg": mass_v, "from": how, "sigma_log": float(sigma_v), "tail_dof": nu}
+            vlm_record = {"mass_kg": mass_v, "from": how, "sigma_log": float(sigma_v),
+                          "tail_dof": None if np.isinf(nu) else float(nu)}
         vlm_record = {"answer": guess.to_json(), **(vlm_record or {"used": False})}
 
     lo_p, hi_p = (1 - config.credible) / 2, (1 + config.credible) / 2

@@ -161,9 +161,10 @@ def _ask(config: VlmConfig, image_path: Path | None, facts: ObjectFacts) -> VlmG
     except OSError as exc:
         raise VlmError(f"{image_path}: cannot read the image ({exc})") from exc
     system, user = build_prompt(facts, material_names())
+    image_sha256 = hashlib.sha256(image_bytes).hexdigest()
     key = hashlib.sha256(json.dumps({
         "version": PROMPT_VERSION, "model": config.model, "system": system, "user": user,
-        "image_sha256": hashlib.sha256(image_bytes).hexdigest(), "max_image_px": config.max_image_px,
+        "image_sha256": image_sha256, "max_image_px": config.max_image_px,
     }, sort_keys=True).encode()).hexdigest()
     cached = _read_cache(config, key)
     if cached is not None:
@@ -188,7 +189,8 @@ def _ask(config: VlmConfig, image_path: Path | None, facts: ObjectFacts) -> VlmG
     reply = _post(config, body)
     content = _message_content(reply)
     guess = parse_answer(content, config.model)
-    _write_cache(config, key, content, reply.get("model"))
+    _write_cache(config, key, content, {"served_model": reply.get("model"), "image_sha256": image_sha256,
+                                        "image": str(image_path)})
     return guess
 
 
@@ -354,15 +356,15 @@ def _read_cache(config: VlmConfig, key: str) -> str | None:
         return None
 
 
-def _write_cache(config: VlmConfig, key: str, content: str, served_model) -> None:
+def _write_cache(config: VlmConfig, key: str, content: str, about: dict) -> None:
     if config.cache_dir is None:
         return
     path = Path(config.cache_dir) / f"{key}.json"
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_text(json.dumps({"model": config.model, "served_model": served_model, "url": config.url,
-                                   "prompt_version": PROMPT_VERSION, "content": content}, indent=1))
+        tmp.write_text(json.dumps({"model": config.model, "url": config.url, "prompt_version": PROMPT_VERSION,
+                                   **about, "content": content}, indent=1))
         tmp.replace(path)
     except OSError as exc:
         logger.warning("VLM answer not cached at %s (%s)", path, exc)
