@@ -198,3 +198,17 @@ def test_a_wildly_wrong_guess_is_discounted_by_the_heavy_tailed_likelihood():
     gaussian = estimate_prior(cube, "pla_printed", guess, PriorConfig(vlm_tail_dof=float("inf"))).inertial.mass
     offline = estimate_prior(cube, "pla_printed").inertial.mass
     assert offline < robust < gaussian and robust < 1.5 * offline
+
+
+def test_bench_priors_bounds_hold_rigpi_truths_and_fusion_beats_the_paper_vlm(capsys):
+    """`twin bench priors`: C holds all six truths; each fused cube prior is closer than the VLM answer it fused."""
+    from twin.bench.priors import bench_priors
+
+    rows = bench_priors()
+    priors = [r for r in rows if "mass_in_bounds" in r]
+    assert {r["object"] for r in priors} == {"cube", "sphere", "apple", "drawer", "cabinet_door", "oven_door"}
+    assert all(r["mass_in_bounds"] and r["inertia_in_bounds"] for r in priors)
+    vlm = {r["answer"]: abs(r["mass_error_pct"]) for r in rows if r["prior"] == "(b) paper VLM" and "mass_kg" in r}
+    fused = {r["answer"]: abs(r["mass_error_pct"]) for r in rows if r["prior"] == "(c) fused" and "mass_kg" in r}
+    assert set(vlm) == set(fused) == {"Gemini", "Intern-S1"} and all(fused[m] < vlm[m] for m in vlm)
+    assert "| cube | (c) fused | Gemini |" in capsys.readouterr().out
