@@ -61,14 +61,19 @@ class Bench:
     sample: cold and warm builds of a synthetic sample against its truth.
     paper: RigPI's cube, sphere and apple, held and moved, several noise draws each.
     priors: RigPI's six objects: prior error (library, the paper's VLM answers, fusion) and whether C holds the truth.
+    throughput: time per identification iteration for 1 and many objects batched, on --device.
     """
 
-    what: tyro.conf.Positional[Literal["sample", "paper", "priors"]]
+    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
     seeds: int = 5
     """Noise draws per object (paper)."""
+    device: str = "cpu"
+    """Warp device for throughput, e.g. cuda:0."""
+    objects: tuple[int, ...] = (1, 1024)
+    """Objects batched per run (throughput)."""
 
 
 def _log(message: str) -> None:
@@ -120,6 +125,10 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.sample import bench_sample
 
                 bench_sample(command.sample, command.methods)
+            elif command.what == "throughput":
+                from twin.bench.throughput import bench_throughput
+
+                bench_throughput(command.device, command.objects)
             elif command.what == "priors":
                 from twin.bench.priors import bench_priors
 

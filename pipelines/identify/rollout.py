@@ -59,6 +59,9 @@ class FreeBodyRollout:
         self.residual = wp.zeros((windows.sample_count + 1, W, 6), dtype=float, device=device, requires_grad=True)
         self.weight = wp.zeros((windows.sample_count + 1, 6), dtype=float, device=device)
         self.loss = wp.zeros(1, dtype=float, device=device, requires_grad=True)
+        self._graphs: dict = {}
+        self._tapes: dict = {}
+        self._loaded: set = set()
 
     def _load(self, theta: np.ndarray, correction: np.ndarray | None, correction_rate: np.ndarray | None):
         W = self.windows.window_count
@@ -105,10 +108,29 @@ class FreeBodyRollout:
                     device=self.device,
                 )
 
+    def _run(self, key, record) -> None:
+        """Issue `record`'s launches; on a GPU, as a CUDA graph captured on first use.
+
+        Hundreds of small launches per rollout make a GPU wait on the host;
+        replaying one graph removes that. The first call runs uncaptured, since
+        modules must be loaded before a capture; the second captures.
+        """
+        import warp as wp
+
+        if not wp.get_device(self.device).is_cuda or key not in self._loaded:
+            self._loaded.add(key)
+            record()
+            return
+        if key not in self._graphs:
+            with wp.ScopedCapture(device=self.device) as capture:
+                record()
+            self._graphs[key] = capture.graph
+        wp.capture_launch(self._graphs[key])
+
     def residuals(self, theta, correction=None, correction_rate=None, momentum_scaled=True) -> np.ndarray:
         """Tracked-frame errors [S, W, 6] for samples 1..S: see `eval_tracked_pose_error`."""
         self._load(theta, correction, correction_rate)
-        self._forward(momentum_scaled)
+        self._run(("forward", momentum_scaled), lambda: self._forward(momentum_scaled))
         return self.residual.numpy()[1:].astype(float)
 
     def loss_and_grad(
@@ -122,23 +144,26 @@ class FreeBodyRollout:
 
         self._load(theta, correction, correction_rate)
         self.weight.assign(np.vstack([np.zeros((1, 6)), weight]).astype(np.float32))
-        tape = wp.Tape()
-        with tape:
-            self._forward(momentum_scaled)
-            self.loss.zero_()
-            wp.launch(
-                eval_weighted_squares,
-                dim=self.residual.shape,
-                inputs=[self.residual, self.weight],
-                outputs=[self.loss],
-                device=self.device,
-            )
-        tape.backward(self.loss)
+        def record():
+            tape = self._tapes[momentum_scaled] = wp.Tape()
+            with tape:
+                self._forward(momentum_scaled)
+                self.loss.zero_()
+                wp.launch(
+                    eval_weighted_squares,
+                    dim=self.residual.shape,
+                    inputs=[self.residual, self.weight],
+                    outputs=[self.loss],
+                    device=self.device,
+                )
+            tape.backward(self.loss)
+
+        self._run(("gradient", momentum_scaled), record)
         out = (
             float(self.loss.numpy()[0]),
             self.theta.grad.numpy().astype(float).copy(),
             self.correction.grad.numpy().astype(float).copy(),
             self.correction_rate.grad.numpy().astype(float).copy(),
         )
-        tape.zero()
+        self._tapes[momentum_scaled].zero()
         return out
