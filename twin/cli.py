@@ -62,14 +62,17 @@ class Bench:
     paper: RigPI's cube, sphere and apple, held and moved, several noise draws each.
     priors: RigPI's six objects: prior error (library, the paper's VLM answers, fusion) and whether C holds the truth.
     throughput: time per identification iteration for 1 and many objects batched, on --device.
+    crlb: spread of the estimates over --draws noise draws against the Cramer-Rao bound.
     """
 
-    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput"]]
+    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
     seeds: int = 5
     """Noise draws per object (paper)."""
+    draws: int = 20
+    """Noise draws per object (crlb)."""
     device: str = "cpu"
     """Warp device for throughput, e.g. cuda:0."""
     objects: tuple[int, ...] = (1, 1024)
@@ -125,6 +128,10 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.sample import bench_sample
 
                 bench_sample(command.sample, command.methods)
+            elif command.what == "crlb":
+                from twin.bench.crlb import bench_crlb
+
+                bench_crlb(command.draws)
             elif command.what == "throughput":
                 from twin.bench.throughput import bench_throughput
 

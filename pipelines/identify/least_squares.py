@@ -55,6 +55,21 @@ def _inertia_operator(v: np.ndarray) -> np.ndarray:
     )
 
 
+def newton_euler_regressor(accel_minus_gravity, omega, alpha) -> np.ndarray:
+    """Regressor [N, 6, 10] with wrench = A pi, pi = (m, m c, Ixx Iyy Izz Ixy Ixz Iyz about the origin).
+
+    Inputs are the frame origin's acceleration minus gravity [m/s^2], angular
+    velocity [rad/s] and angular acceleration [rad/s^2], all [N, 3] in the frame's axes.
+    """
+    A = np.zeros((len(omega), 6, 10))
+    A[:, :3, 0] = accel_minus_gravity
+    Sw = _skew(omega)
+    A[:, :3, 1:4] = _skew(alpha) + Sw @ Sw
+    A[:, 3:, 1:4] = -_skew(accel_minus_gravity)
+    A[:, 3:, 4:] = _inertia_operator(alpha) + Sw @ _inertia_operator(omega)
+    return A
+
+
 def identify_least_squares(
     pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque,
     X_tracked_body: Pose, *, cutoff_hz: float = 12.0, t_begin_s: float | None = None, block_s: float = 0.1,
@@ -90,13 +105,7 @@ def identify_least_squares(
     f_b = R_inv.apply(wrench[keep, :3])
     tau_b = R_inv.apply(wrench[keep, 3:])
     n = int(keep.sum())
-
-    A = np.zeros((n, 6, 10))
-    A[:, :3, 0] = a_g
-    Sw = _skew(w_b)
-    A[:, :3, 1:4] = _skew(al_b) + Sw @ Sw
-    A[:, 3:, 1:4] = -_skew(a_g)
-    A[:, 3:, 4:] = _inertia_operator(al_b) + Sw @ _inertia_operator(w_b)
+    A = newton_euler_regressor(a_g, w_b, al_b)
     b = np.concatenate([f_b, tau_b], axis=1)
     scale = np.array([1 / noise.force_n] * 3 + [1 / noise.torque_nm] * 3)
     As = (A * scale[None, :, None]).reshape(-1, 10)
@@ -109,11 +118,11 @@ def identify_least_squares(
     B = len(blocks)
     cov_pi = H_inv @ (blocks.T @ blocks * B / max(B - 10, 1)) @ H_inv
 
-    inertial, J = _object_frame(pi, X_tracked_body)
+    inertial, J = object_frame_from_pi(pi, X_tracked_body)
     return LeastSquaresResult(inertial, J @ cov_pi @ J.T, cutoff_hz, n)
 
 
-def _object_frame(pi: np.ndarray, X_tracked_body: Pose) -> tuple[Inertial, np.ndarray]:
+def object_frame_from_pi(pi: np.ndarray, X_tracked_body: Pose) -> tuple[Inertial, np.ndarray]:
     """Convert pi (tracked frame, about its origin) to an object-frame Inertial, with the Jacobian."""
 
     def convert(p):
