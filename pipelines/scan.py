@@ -1,4 +1,6 @@
-"""Read an RGB-D scan directory in the nerfstudio layout (DESIGN.md, "Inputs").
+"""Read an RGB-D scan directory (DESIGN.md, "Inputs"); the layout is detected.
+
+The nerfstudio layout (primary):
 
     scan_dir/
       transforms.json   fl_x fl_y cx cy w h, optional k1 k2 p1 p2,
@@ -6,6 +8,23 @@
                         frames: [{file_path, depth_file_path, mask_path?, transform_matrix}]
       images/...  depth/... (16-bit PNG)  masks/... (optional, 8-bit, object > 0)
       object.json       optional: {"name", "material", "notes"}
+
+The 7-Scenes / tsdf-fusion layout (Kinect-style frames in one folder):
+
+    scan_dir/
+      camera-intrinsics.txt          3x3 K [pixels] (of the depth camera)
+      frame-XXXXXX.depth.png         16-bit depth [mm unless told otherwise]; 0 and 65535 invalid
+      frame-XXXXXX.color.jpg|.png    colour, the depth image's size (not necessarily registered)
+      frame-XXXXXX.pose.txt          4x4 camera-to-world [m], OpenCV camera axes (optional, see below)
+      frame-XXXXXX.mask.png          optional object mask (8-bit, object > 0)
+      object.json                    optional, as above
+
+Frames without poses (no `transform_matrix` in any nerfstudio frame, no
+`.pose.txt` in the 7-Scenes layout) are posed by `pipelines.posing` (RGB-D
+odometry refined by ICP); their world frame is then the first camera's. A scan
+whose poses are given can be re-posed the same way (`poses="estimate"`) to
+measure the estimator against the given poses, which are kept in
+`Scan.given_T_world_camera`.
 
 Conventions this reader settles for everything downstream:
 
@@ -23,14 +42,23 @@ message starts with the path of the offending file.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-__all__ = ["Frame", "Intrinsics", "Scan", "ScanError", "read_scan", "OPENCV_FROM_OPENGL"]
+if TYPE_CHECKING:
+    from .posing import PosingConfig
+
+__all__ = ["Frame", "Intrinsics", "Scan", "ScanError", "read_scan", "OPENCV_FROM_OPENGL", "ScanLayout", "PoseSource"]
+
+ScanLayout = Literal["nerfstudio", "7scenes"]
+PoseSource = Literal["auto", "given", "estimate"]
 
 OPENCV_FROM_OPENGL = np.diag([1.0, -1.0, -1.0, 1.0])
 """Right-multiply a camera-to-world matrix in OpenGL axes by this to get OpenCV axes (and back)."""
@@ -42,6 +70,10 @@ _ROTATION_TOLERANCE = 1e-3  # max |R^T R - I| entry accepted before re-orthonorm
 _INTRINSIC_KEYS = ("fl_x", "fl_y", "cx", "cy", "w", "h")
 _DISTORTION_KEYS = ("k1", "k2", "p1", "p2")
 _SUPPORTED_CAMERA_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE", "RADIAL", "SIMPLE_RADIAL")
+_SEVEN_SCENES_INTRINSICS = "camera-intrinsics.txt"
+_SEVEN_SCENES_DEPTH = re.compile(r"^frame-(\d+)\.depth\.png$")
+_SEVEN_SCENES_COLOR_SUFFIXES = (".color.jpg", ".color.png")
+_SEVEN_SCENES_INVALID_DEPTH = 65535  # Kinect's "no reading" besides 0
 
 
 class ScanError(ValueError):
@@ -105,8 +137,14 @@ class Scan:
 
     root: the scan directory. name: from object.json, else the directory's name.
     material_hint, notes: from object.json (None when not given).
-    intrinsics: the scan's camera (top-level keys of transforms.json).
+    intrinsics: the scan's camera (top-level keys of transforms.json, or camera-intrinsics.txt).
     frames: the views, in file order.
+    layout: the directory layout it was read from.
+    pose_source: "given" (read from the scan) or "estimated" (by `pipelines.posing`; world frame =
+      the first camera's, OpenCV axes).
+    given_T_world_camera: when the poses were estimated although the scan gives them, the given
+      ones [m], OpenCV axes, shape [frame_count, 4, 4]; else None.
+    pose_stats: the pose estimator's statistics (empty for given poses), JSON-serialisable.
     """
 
     root: Path
@@ -115,31 +153,112 @@ class Scan:
     notes: str | None
     intrinsics: Intrinsics
     frames: tuple[Frame, ...]
+    layout: ScanLayout = "nerfstudio"
+    pose_source: Literal["given", "estimated"] = "given"
+    given_T_world_camera: np.ndarray | None = None
+    pose_stats: dict = field(default_factory=dict)
 
 
-def read_scan(path: str | Path) -> Scan:
-    """Read and check a scan directory in the nerfstudio layout.
+def read_scan(
+    path: str | Path,
+    *,
+    poses: PoseSource = "auto",
+    posing: "PosingConfig | None" = None,
+    depth_unit_m: float | None = None,
+) -> Scan:
+    """Read and check a scan directory; its layout (nerfstudio or 7-Scenes) is detected.
 
     Args:
         path: the scan directory (or its transforms.json).
+        poses: "auto" uses the scan's poses, or estimates them when it has none; "given"
+            requires them; "estimate" estimates them even when given (keeping the given ones
+            in `Scan.given_T_world_camera`, to measure the estimator).
+        posing: settings of the pose estimator (default `PosingConfig()`).
+        depth_unit_m: metres per depth unit of the 7-Scenes layout (default 0.001, millimetres);
+            the nerfstudio layout states its own (`depth_unit_scale_factor`).
 
     Returns:
         The scan, depth in metres, poses in OpenCV axes.
 
     Raises:
-        ScanError: naming the offending file for a missing transforms.json, bad
-            intrinsics, no frames, a frame without depth, missing or unreadable
-            files, depth that is not 16-bit, image sizes that differ from w/h,
-            non-finite or non-rigid poses, or an implausible depth scale.
+        ScanError: naming the offending file for a directory of neither layout, bad
+            intrinsics, no frames, a frame without depth, missing or unreadable files, depth
+            that is not 16-bit, image sizes that differ from the camera's, non-finite or
+            non-rigid poses, poses given for some frames only, missing poses with
+            poses="given", an implausible depth scale, or frames the estimator cannot pose.
     """
     path = Path(path)
     root = path.parent if path.name == "transforms.json" else path
     root = root.resolve()
-    transforms_path = root / "transforms.json"
     if not root.is_dir():
         raise ScanError(f"{root}: scan directory not found")
-    if not transforms_path.is_file():
-        raise ScanError(f"{transforms_path}: missing transforms.json (the nerfstudio layout needs one)")
+    if poses not in ("auto", "given", "estimate"):
+        raise ScanError(f"{root}: poses must be 'auto', 'given' or 'estimate', got {poses!r}")
+    if (root / "transforms.json").is_file():
+        if depth_unit_m is not None:
+            raise ScanError(f"{root / 'transforms.json'}: the nerfstudio layout gives its depth unit in "
+                            "depth_unit_scale_factor; do not pass depth_unit_m")
+        layout: ScanLayout = "nerfstudio"
+        intrinsics, frames, depth_scale, listing = _read_nerfstudio(root)
+    elif (root / _SEVEN_SCENES_INTRINSICS).is_file() or any(_seven_scenes_depths(root)):
+        layout = "7scenes"
+        depth_scale = _DEFAULT_DEPTH_SCALE_M if depth_unit_m is None else _checked_depth_unit(depth_unit_m, root)
+        intrinsics, frames, listing = _read_seven_scenes(root, depth_scale)
+    else:
+        raise ScanError(
+            f"{root / 'transforms.json'}: missing transforms.json (the nerfstudio layout needs one), and no "
+            f"frame-XXXXXX.depth.png files of the 7-Scenes layout either"
+        )
+
+    valid = np.concatenate([f.depth_m[f.depth_m > 0][::97] for f, _ in frames])
+    median_m = float(np.median(valid))
+    lo, hi = _MEDIAN_DEPTH_RANGE_M
+    if not lo <= median_m <= hi:
+        unit = "depth_unit_scale_factor" if layout == "nerfstudio" else "depth unit"
+        raise ScanError(
+            f"{listing}: {unit} {depth_scale:g} m/unit gives a median depth of "
+            f"{median_m:.4g} m, outside the plausible [{lo}, {hi}] m; is the depth unit right?"
+        )
+
+    posed = [T is not None for _, T in frames]
+    if any(posed) and not all(posed):
+        i = posed.index(False)
+        raise ScanError(f"{frames[i][0].depth_path}: frame {i} has no pose while others have; "
+                        "give every frame a pose or none")
+    if not any(posed) and poses == "given":
+        raise ScanError(f"{listing}: the scan gives no camera poses (poses='given')")
+    given = np.stack([T for _, T in frames]) if all(posed) else None
+    name, material, notes = _object_info(root / "object.json", default_name=root.name)
+    scan = Scan(
+        root=root,
+        name=name,
+        material_hint=material,
+        notes=notes,
+        intrinsics=intrinsics,
+        frames=tuple(dataclasses.replace(f, T_world_camera=T) if T is not None else f for f, T in frames),
+        layout=layout,
+    )
+    if given is not None and poses != "estimate":
+        return scan
+    from .posing import PosingConfig, PosingError, estimate_poses
+
+    try:
+        estimate = estimate_poses(scan.frames, posing or PosingConfig())
+    except PosingError as e:
+        raise ScanError(f"{listing}: could not estimate the camera poses ({e})") from e
+    posed_frames = []
+    for f, T in zip(scan.frames, estimate.T_world_camera):
+        T = np.array(T, dtype=float)
+        T.setflags(write=False)
+        posed_frames.append(dataclasses.replace(f, T_world_camera=T))
+    return dataclasses.replace(
+        scan, frames=tuple(posed_frames), pose_source="estimated", given_T_world_camera=given, pose_stats=estimate.stats
+    )
+
+
+def _read_nerfstudio(root: Path) -> tuple[Intrinsics, list, float, Path]:
+    """Intrinsics, (frame, pose or None) pairs, depth scale and the listing file of a nerfstudio scan."""
+    transforms_path = root / "transforms.json"
     meta = _read_json(transforms_path)
     if not isinstance(meta, dict):
         raise ScanError(f"{transforms_path}: expected a JSON object at the top level")
@@ -160,22 +279,13 @@ def read_scan(path: str | Path) -> Scan:
         intrinsics = _intrinsics(meta, transforms_path, "transforms.json")
     else:  # per-frame intrinsics only (as Polycam exports write them): the first frame's stands for the scan
         intrinsics = _intrinsics(frames_meta[0], transforms_path, "frame 0")
-
-    frames = tuple(
-        _read_frame(i, f, meta, intrinsics, root, transforms_path, depth_scale) for i, f in enumerate(frames_meta)
-    )
-
-    valid = np.concatenate([f.depth_m[f.depth_m > 0][::97] for f in frames])
-    median_m = float(np.median(valid))
-    lo, hi = _MEDIAN_DEPTH_RANGE_M
-    if not lo <= median_m <= hi:
-        raise ScanError(
-            f"{transforms_path}: depth_unit_scale_factor {depth_scale:g} m/unit gives a median depth of "
-            f"{median_m:.4g} m, outside the plausible [{lo}, {hi}] m; is the depth unit right?"
-        )
-
-    name, material, notes = _object_info(root / "object.json", default_name=root.name)
-    return Scan(root=root, name=name, material_hint=material, notes=notes, intrinsics=intrinsics, frames=frames)
+    # a scan either poses every frame or none (then the poses are estimated)
+    pose_free = all(isinstance(f, dict) and "transform_matrix" not in f for f in frames_meta)
+    frames = [
+        _read_frame(i, f, meta, intrinsics, root, transforms_path, depth_scale, pose_free)
+        for i, f in enumerate(frames_meta)
+    ]
+    return intrinsics, frames, depth_scale, transforms_path
 
 
 def _read_json(path: Path):
@@ -291,14 +401,16 @@ def _image_size(path: Path) -> tuple[int, int]:
         raise ScanError(f"{path}: cannot read image ({e})") from e
 
 
-def _check_size(path: Path, size: tuple[int, int], intr: Intrinsics, what: str) -> None:
+def _check_size(path: Path, size: tuple[int, int], intr: Intrinsics, what: str, source: str = "transforms.json") -> None:
     if size != (intr.width, intr.height):
         raise ScanError(
-            f"{path}: {what} is {size[0]}x{size[1]} pixels but transforms.json says w x h = {intr.width}x{intr.height}"
+            f"{path}: {what} is {size[0]}x{size[1]} pixels but {source} says w x h = {intr.width}x{intr.height}"
         )
 
 
-def _read_depth(path: Path, intr: Intrinsics, scale_m: float) -> np.ndarray:
+def _read_depth(
+    path: Path, intr: Intrinsics, scale_m: float, source: str = "transforms.json", invalid: int | None = None
+) -> np.ndarray:
     if path.suffix.lower() == ".npy":
         try:
             raw = np.load(path, allow_pickle=False)
@@ -311,19 +423,21 @@ def _read_depth(path: Path, intr: Intrinsics, scale_m: float) -> np.ndarray:
         if not im.mode.startswith("I;16"):
             raise ScanError(f"{path}: depth must be a 16-bit single-channel image, got PIL mode {im.mode!r}")
         raw = np.array(im).astype(np.uint16, copy=False)
-    _check_size(path, (raw.shape[1], raw.shape[0]), intr, "depth image")
+    _check_size(path, (raw.shape[1], raw.shape[0]), intr, "depth image", source)
     depth = raw.astype(np.float32) * np.float32(scale_m)
+    if invalid is not None:
+        depth[raw == invalid] = 0.0
     if not np.any(depth > 0):
         raise ScanError(f"{path}: depth image has no valid (non-zero) pixels")
     depth.setflags(write=False)
     return depth
 
 
-def _read_mask(path: Path, intr: Intrinsics) -> np.ndarray:
+def _read_mask(path: Path, intr: Intrinsics, source: str = "transforms.json") -> np.ndarray:
     im = _open_image(path)
     if im.mode not in ("1", "L", "P", "LA", "RGB", "RGBA"):
         raise ScanError(f"{path}: mask must be an 8-bit image (object > 0), got PIL mode {im.mode!r}")
-    _check_size(path, im.size, intr, "mask")
+    _check_size(path, im.size, intr, "mask", source)
     if im.mode == "P":
         im = im.convert("L")
     arr = np.array(im)
@@ -333,8 +447,8 @@ def _read_mask(path: Path, intr: Intrinsics) -> np.ndarray:
 
 
 def _read_frame(
-    i: int, f, meta: dict, shared: Intrinsics, root: Path, transforms_path: Path, depth_scale: float
-) -> Frame:
+    i: int, f, meta: dict, shared: Intrinsics, root: Path, transforms_path: Path, depth_scale: float, pose_free: bool
+) -> tuple[Frame, np.ndarray | None]:
     if not isinstance(f, dict):
         raise ScanError(f"{transforms_path}: frame {i} must be a JSON object, got {type(f).__name__}")
     intr = _frame_intrinsics(i, f, meta, shared, transforms_path)
@@ -345,23 +459,142 @@ def _read_frame(
             "twin needs an RGB-D scan"
         )
     depth_path = _file(root, f["depth_file_path"], transforms_path, "depth image (depth_file_path)", i)
-    T = _pose_opencv(i, f, transforms_path)
+    T = None if pose_free else _pose_opencv(i, f, transforms_path)
     _check_size(color_path, _image_size(color_path), intr, "colour image")
     depth = _read_depth(depth_path, intr, depth_scale)
     mask_path = mask = None
     if f.get("mask_path"):
         mask_path = _file(root, f["mask_path"], transforms_path, "mask (mask_path)", i)
         mask = _read_mask(mask_path, intr)
-    T.setflags(write=False)
-    return Frame(
+    if T is not None:
+        T.setflags(write=False)
+    frame = Frame(
         color_path=color_path,
         depth_m=depth,
         mask=mask,
-        T_world_camera=T,
+        T_world_camera=_UNPOSED,
         intrinsics=intr,
         depth_path=depth_path,
         mask_path=mask_path,
     )
+    return frame, T
+
+
+_UNPOSED = np.full((4, 4), np.nan)
+"""Stands for a pose until the estimator fills it in; never returned by `read_scan`."""
+_UNPOSED.setflags(write=False)
+
+
+# ---------------------------------------------------------------------------------------------
+# 7-Scenes / tsdf-fusion layout
+
+
+def _seven_scenes_depths(root: Path) -> list[tuple[int, Path]]:
+    """(frame number, depth path) of every frame-XXXXXX.depth.png, in frame order."""
+    found = []
+    for p in root.iterdir():
+        m = _SEVEN_SCENES_DEPTH.match(p.name)
+        if m:
+            found.append((int(m.group(1)), p))
+    return sorted(found)
+
+
+def _checked_depth_unit(value, root: Path) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ScanError(f"{root}: depth_unit_m must be a finite number [m/unit], got {value!r}")
+    if not 0.0 < value <= _MAX_DEPTH_SCALE_M:
+        raise ScanError(f"{root}: depth_unit_m {value!r} m/unit is out of range (0, {_MAX_DEPTH_SCALE_M}]")
+    return float(value)
+
+
+def _read_matrix(path: Path, shape: tuple[int, int], what: str) -> np.ndarray:
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScanError(f"{path}: cannot read ({e})") from e
+    try:
+        rows = [[float(x) for x in line.split()] for line in text.splitlines() if line.strip()]
+        M = np.array(rows, dtype=float)
+    except ValueError as e:
+        raise ScanError(f"{path}: {what} is not a whitespace-separated numeric matrix ({e})") from e
+    if M.shape != shape:
+        raise ScanError(f"{path}: {what} must be {shape[0]}x{shape[1]}, got {len(rows)} rows of "
+                        f"{sorted({len(r) for r in rows})} numbers")
+    if not np.all(np.isfinite(M)):
+        raise ScanError(f"{path}: {what} has non-finite entries")
+    return M
+
+
+def _seven_scenes_intrinsics(path: Path, width: int, height: int, size_from: Path) -> Intrinsics:
+    if not path.is_file():
+        raise ScanError(
+            f"{path}: missing camera-intrinsics.txt (3x3 K in pixels; 7-Scenes' Kinect depth camera is "
+            "585 0 320 / 0 585 240 / 0 0 1)"
+        )
+    K = _read_matrix(path, (3, 3), "the camera matrix K")
+    if abs(K[0, 1]) > 1e-9 or np.abs(K[1:, 0]).max() > 1e-9 or abs(K[2, 1]) > 1e-9 or abs(K[2, 2] - 1) > 1e-9:
+        raise ScanError(f"{path}: K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew), got {K.tolist()}")
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    if fx <= 0 or fy <= 0:
+        raise ScanError(f"{path}: focal lengths must be positive [pixels], got fx={fx}, fy={fy}")
+    if not (0 < cx < width and 0 < cy < height):
+        raise ScanError(
+            f"{path}: principal point ({cx}, {cy}) lies outside the {width}x{height} image ({size_from.name})"
+        )
+    return Intrinsics(fx=float(fx), fy=float(fy), cx=float(cx), cy=float(cy), width=width, height=height)
+
+
+def _seven_scenes_pose(path: Path) -> np.ndarray:
+    T = _read_matrix(path, (4, 4), "the camera-to-world pose")
+    if np.abs(T[3] - [0.0, 0.0, 0.0, 1.0]).max() > 1e-6:
+        raise ScanError(f"{path}: the pose's last row must be [0, 0, 0, 1], got {T[3].tolist()}")
+    R = T[:3, :3]
+    err = np.abs(R.T @ R - np.eye(3)).max()
+    if err > _ROTATION_TOLERANCE or np.linalg.det(R) <= 0:
+        raise ScanError(
+            f"{path}: the pose is not rigid (|R^T R - I| = {err:.3g}, det R = {np.linalg.det(R):.4g}); "
+            "expected a camera-to-world rotation and a translation in metres"
+        )
+    U, _, Vt = np.linalg.svd(R)  # KinectFusion's poses drift off SO(3) by ~4e-4
+    T[:3, :3] = U @ Vt
+    T.setflags(write=False)
+    return T
+
+
+def _read_seven_scenes(root: Path, depth_scale: float) -> tuple[Intrinsics, list, Path]:
+    """Intrinsics, (frame, pose or None) pairs and the intrinsics file of a 7-Scenes scan."""
+    intrinsics_path = root / _SEVEN_SCENES_INTRINSICS
+    depths = _seven_scenes_depths(root)
+    if not depths:
+        raise ScanError(f"{root}: no frames (expected frame-XXXXXX.depth.png files beside {intrinsics_path.name})")
+    first = depths[0][1]
+    width, height = _image_size(first)
+    intrinsics = _seven_scenes_intrinsics(intrinsics_path, width, height, first)
+    source = f"the first depth image ({first.name})"
+    frames = []
+    for i, (_, depth_path) in enumerate(depths):
+        stem = depth_path.name[: -len(".depth.png")]
+        colors = [root / f"{stem}{suffix}" for suffix in _SEVEN_SCENES_COLOR_SUFFIXES]
+        color_path = next((p for p in colors if p.is_file()), None)
+        if color_path is None:
+            raise ScanError(f"{colors[0]}: colour image of frame {i} not found (nor {colors[1].name})")
+        _check_size(color_path, _image_size(color_path), intrinsics, "colour image", source)
+        depth = _read_depth(depth_path, intrinsics, depth_scale, source, invalid=_SEVEN_SCENES_INVALID_DEPTH)
+        pose_path = root / f"{stem}.pose.txt"
+        T = _seven_scenes_pose(pose_path) if pose_path.exists() else None
+        mask_path = root / f"{stem}.mask.png"
+        mask = _read_mask(mask_path, intrinsics, source) if mask_path.exists() else None
+        frame = Frame(
+            color_path=color_path.resolve(),
+            depth_m=depth,
+            mask=mask,
+            T_world_camera=_UNPOSED,
+            intrinsics=intrinsics,
+            depth_path=depth_path.resolve(),
+            mask_path=mask_path.resolve() if mask is not None else None,
+        )
+        frames.append((frame, T))
+    return intrinsics, frames, intrinsics_path
 
 
 def _object_info(path: Path, default_name: str) -> tuple[str, str | None, str | None]:

@@ -246,3 +246,238 @@ def test_arrays_are_read_only(tmp_path):
         frame.depth_m[0, 0] = 1.0
     with pytest.raises(ValueError):
         frame.mask[0, 0] = True
+
+
+# ---------------------------------------------------------------------------------------------
+# 7-Scenes / tsdf-fusion layout
+
+REAL_7SCENES = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd" / "7scenes_tsdf_demo_subset"
+K_TEXT = "10 0 4\n0 11 3\n0 0 1\n"
+
+
+def _pose_text(T: np.ndarray) -> str:
+    return "\n".join(" ".join(f"{x:.12e}" for x in row) for row in T) + "\n"
+
+
+def _write_7scenes(root: Path, frame_count: int = 2, poses: bool = True) -> Path:
+    """A tiny 7-Scenes scan: 8x6 frames, depth 500 mm with a 300 mm patch, one 0 and one 65535 pixel."""
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "camera-intrinsics.txt").write_text(K_TEXT)
+    for i in range(frame_count):
+        stem = root / f"frame-{i:06d}"
+        Image.fromarray(np.full((H, W, 3), 128, np.uint8)).save(f"{stem}.color.jpg")
+        depth = np.full((H, W), 500, np.uint16)
+        depth[2:4, 3:5] = 300
+        depth[0, 0] = 0
+        depth[0, 1] = 65535
+        Image.fromarray(depth).save(f"{stem}.depth.png")
+        if poses:
+            T = np.eye(4)  # OpenCV camera at (x, 0, 0) looking along world +z
+            T[:3, 3] = (0.1 * i, 0.0, 0.0)
+            Path(f"{stem}.pose.txt").write_text(_pose_text(T))
+    return root
+
+
+def test_reads_the_7scenes_layout(tmp_path):
+    """Depth in metres with 0 and 65535 invalid, K from camera-intrinsics.txt, poses as given (OpenCV axes)."""
+    scan = read_scan(_write_7scenes(tmp_path / "kitchen", frame_count=3))
+    assert scan.layout == "7scenes" and scan.pose_source == "given" and scan.name == "kitchen"
+    intr = scan.intrinsics
+    assert (intr.fx, intr.fy, intr.cx, intr.cy, intr.width, intr.height) == (10, 11, 4, 3, W, H)
+    assert [f.depth_path.name for f in scan.frames] == [f"frame-{i:06d}.depth.png" for i in range(3)]
+    f = scan.frames[2]
+    assert f.depth_m[0, 0] == 0.0 and f.depth_m[0, 1] == 0.0  # 65535 is Kinect's "invalid"
+    assert f.depth_m[2, 3] == pytest.approx(0.3) and f.depth_m[5, 7] == pytest.approx(0.5)
+    assert f.mask is None and f.color_path.name == "frame-000002.color.jpg"
+    np.testing.assert_allclose(f.T_world_camera[:3, 3], [0.2, 0, 0])
+    np.testing.assert_allclose(f.T_world_camera[:3, :3], np.eye(3))
+
+
+def test_7scenes_pose_slightly_off_rotation_is_orthonormalised(tmp_path):
+    """A KinectFusion pose with det R = 0.9997 is accepted and made a rotation."""
+    root = _write_7scenes(tmp_path / "s")
+    T = np.eye(4)
+    T[:3, :3] = np.diag([0.9999, 0.9999, 0.9999])
+    (root / "frame-000001.pose.txt").write_text(_pose_text(T))
+    R = read_scan(root).frames[1].T_world_camera[:3, :3]
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+
+
+def test_7scenes_depth_unit_can_be_given(tmp_path):
+    """depth_unit_m=1e-4 reads 5000 units as 0.5 m."""
+    root = _write_7scenes(tmp_path / "s")
+    for i in range(2):
+        Image.fromarray(np.full((H, W), 5000, np.uint16)).save(root / f"frame-{i:06d}.depth.png")
+    assert read_scan(root, depth_unit_m=1e-4).frames[0].depth_m[1, 1] == pytest.approx(0.5)
+
+
+def _write_text(name, text):
+    def damage(root):
+        (root / name).write_text(text)
+        return root / name, None
+
+    return damage
+
+
+def _nan_pose(root):
+    T = np.eye(4)
+    T[0, 3] = np.nan
+    (root / "frame-000001.pose.txt").write_text(_pose_text(T))
+    return root / "frame-000001.pose.txt", "non-finite"
+
+
+def _scaled_7scenes_pose(root):
+    (root / "frame-000001.pose.txt").write_text(_pose_text(np.diag([1.1, 1.1, 1.1, 1.0])))
+    return root / "frame-000001.pose.txt", "not rigid"
+
+
+def _bad_last_row(root):
+    T = np.eye(4)
+    T[3, 0] = 0.5
+    (root / "frame-000001.pose.txt").write_text(_pose_text(T))
+    return root / "frame-000001.pose.txt", "last row"
+
+
+def _short_pose(root):
+    (root / "frame-000001.pose.txt").write_text(_pose_text(np.eye(4)[:3]))
+    return root / "frame-000001.pose.txt", "must be 4x4"
+
+
+def _text_pose(root):
+    (root / "frame-000001.pose.txt").write_text("identity\n")
+    return root / "frame-000001.pose.txt", "numeric"
+
+
+def _one_pose_missing(root):
+    (root / "frame-000001.pose.txt").unlink()
+    return root / "frame-000001.depth.png", "no pose"
+
+
+def _no_intrinsics(root):
+    (root / "camera-intrinsics.txt").unlink()
+    return root / "camera-intrinsics.txt", "missing camera-intrinsics.txt"
+
+
+def _skewed_k(root):
+    (root / "camera-intrinsics.txt").write_text("10 0.5 4\n0 11 3\n0 0 1\n")
+    return root / "camera-intrinsics.txt", "no skew"
+
+
+def _negative_focal(root):
+    (root / "camera-intrinsics.txt").write_text("-10 0 4\n0 11 3\n0 0 1\n")
+    return root / "camera-intrinsics.txt", "focal"
+
+
+def _k_outside(root):
+    (root / "camera-intrinsics.txt").write_text("10 0 40\n0 11 3\n0 0 1\n")
+    return root / "camera-intrinsics.txt", "principal point"
+
+
+def _k_2x3(root):
+    (root / "camera-intrinsics.txt").write_text("10 0 4\n0 11 3\n")
+    return root / "camera-intrinsics.txt", "must be 3x3"
+
+
+def _7scenes_color_missing(root):
+    (root / "frame-000001.color.jpg").unlink()
+    return root / "frame-000001.color.jpg", "not found"
+
+
+def _7scenes_color_size(root):
+    Image.fromarray(np.zeros((H + 2, W, 3), np.uint8)).save(root / "frame-000001.color.jpg")
+    return root / "frame-000001.color.jpg", "w x h"
+
+
+def _7scenes_depth_size(root):
+    Image.fromarray(np.full((H, W + 1), 500, np.uint16)).save(root / "frame-000001.depth.png")
+    return root / "frame-000001.depth.png", "w x h"
+
+
+def _7scenes_depth_8bit(root):
+    Image.fromarray(np.full((H, W), 50, np.uint8)).save(root / "frame-000001.depth.png")
+    return root / "frame-000001.depth.png", "16-bit"
+
+
+def _7scenes_depth_all_invalid(root):
+    Image.fromarray(np.full((H, W), 65535, np.uint16)).save(root / "frame-000001.depth.png")
+    return root / "frame-000001.depth.png", "no valid"
+
+
+_7SCENES_ERRORS = [
+    _nan_pose,
+    _scaled_7scenes_pose,
+    _bad_last_row,
+    _short_pose,
+    _text_pose,
+    _one_pose_missing,
+    _no_intrinsics,
+    _skewed_k,
+    _negative_focal,
+    _k_outside,
+    _k_2x3,
+    _7scenes_color_missing,
+    _7scenes_color_size,
+    _7scenes_depth_size,
+    _7scenes_depth_8bit,
+    _7scenes_depth_all_invalid,
+]
+
+
+@pytest.mark.parametrize("damage", _7SCENES_ERRORS, ids=[f.__name__.strip("_") for f in _7SCENES_ERRORS])
+def test_malformed_7scenes_raise_scan_error_naming_the_file(tmp_path, damage):
+    """Each malformed 7-Scenes file raises ScanError that starts with its path and says what is wrong."""
+    root = _write_7scenes(tmp_path / "s")
+    path, words = damage(root)
+    with pytest.raises(ScanError) as info:
+        read_scan(root)
+    message = str(info.value)
+    assert message.startswith(str(path.resolve())), message
+    assert words in message
+
+
+def test_7scenes_implausible_depth_unit_raises(tmp_path):
+    """A depth unit that puts the median depth at 0.5 mm raises ScanError naming camera-intrinsics.txt."""
+    root = _write_7scenes(tmp_path / "s")
+    with pytest.raises(ScanError, match="median depth") as info:
+        read_scan(root, depth_unit_m=1e-6)
+    assert str(info.value).startswith(str((root / "camera-intrinsics.txt").resolve()))
+
+
+def test_7scenes_without_poses_refuses_given(tmp_path):
+    """poses='given' on a scan with no pose files raises ScanError saying so."""
+    root = _write_7scenes(tmp_path / "s", poses=False)
+    with pytest.raises(ScanError, match="gives no camera poses"):
+        read_scan(root, poses="given")
+
+
+def test_directory_of_neither_layout_raises(tmp_path):
+    """A directory with neither transforms.json nor frame-*.depth.png names both layouts."""
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "frame-000000.color.jpg").write_bytes(b"")
+    with pytest.raises(ScanError, match="7-Scenes"):
+        read_scan(tmp_path / "x")
+
+
+@pytest.mark.skipif(not REAL_7SCENES.is_dir(), reason="../shared/data is absent")
+def test_reads_real_kinect_frames(tmp_path):
+    """Three real 7-Scenes Kinect frames read with K 585/320/240, 0.8-4 m depth and rigid camera-to-world poses."""
+    root = tmp_path / "kinect"
+    root.mkdir()
+    (root / "camera-intrinsics.txt").symlink_to(REAL_7SCENES / "camera-intrinsics.txt")
+    for n in (0, 10, 500):
+        for suffix in ("color.jpg", "depth.png", "pose.txt"):
+            name = f"frame-{n:06d}.{suffix}"
+            (root / name).symlink_to(REAL_7SCENES / name)
+    scan = read_scan(root)
+    assert scan.layout == "7scenes" and len(scan.frames) == 3
+    intr = scan.intrinsics
+    assert (intr.fx, intr.fy, intr.cx, intr.cy, intr.width, intr.height) == (585, 585, 320, 240, 640, 480)
+    for frame in scan.frames:
+        valid = frame.depth_m[frame.depth_m > 0]
+        assert 0.7 < valid.min() and valid.max() < 4.0  # millimetres read as metres, 65535 dropped
+        assert 0.7 < valid.size / frame.depth_m.size < 0.99
+        R = frame.T_world_camera[:3, :3]
+        np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-9)
+    raw = np.loadtxt(REAL_7SCENES / "frame-000500.pose.txt")
+    np.testing.assert_allclose(scan.frames[2].T_world_camera[:3, 3], raw[:3, 3])
+    np.testing.assert_allclose(scan.frames[2].T_world_camera[:3, :3], raw[:3, :3], atol=1e-3)
