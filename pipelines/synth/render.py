@@ -43,6 +43,9 @@ class RenderConfig:
     """Camera elevation of each ring above the table plane [deg], 0-90."""
     distance_range_m: tuple[float, float] = (0.35, 0.5)
     """Camera distance from the object's centre [m], drawn uniformly per view."""
+    azimuth_span_deg: float = 360.0
+    """Azimuth range each ring's views are spread over [deg], 0-360; less than 360 gives an arc
+    (a hand-held sweep whose consecutive views overlap, as pose-free scans need)."""
     azimuth_jitter_deg: float = 5.0
     """Uniform jitter of each view's azimuth [deg]."""
     look_at_jitter_m: float = 0.005
@@ -224,7 +227,7 @@ def _camera_poses(config: RenderConfig, centre: np.ndarray, rng: np.random.Gener
     poses = []
     for r, (elevation, count) in enumerate(zip(config.elevations_deg, counts)):
         for k in range(count):
-            azimuth = 2 * np.pi * (k + r / rings) / max(count, 1)
+            azimuth = np.deg2rad(config.azimuth_span_deg) * (k + r / rings) / max(count, 1)
             azimuth += np.deg2rad(rng.uniform(-1, 1) * config.azimuth_jitter_deg)
             distance = rng.uniform(*config.distance_range_m)
             el = np.deg2rad(elevation)
