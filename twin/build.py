@@ -37,6 +37,7 @@ class BuildConfig:
     method: Literal["newton", "ls"] = "newton"
     window_s: float = 0.1
     max_iterations: int = 30
+    optimizer: Literal["gauss-newton", "paper"] = "gauss-newton"
     cache_dir: Path = Path.home() / ".cache" / "twin"
     vlm: str | None = None
     vlm_model: str | None = None
@@ -104,7 +105,8 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     material = prior.material
 
     X_tracked_body = tracked_to_object(trials[0], placement)
-    id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations)
+    id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations,
+                               optimizer=config.optimizer)
     held = timer.run(
         "identify", identify_held, trials, holdout, X_tracked_body, prior.inertial,
         InertialBounds(prior.lower, prior.upper), id_config, config.method, _progress_logger(log),

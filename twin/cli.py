@@ -33,6 +33,8 @@ class Build:
     """Shooting-window length [s]."""
     max_iterations: int = 30
     """Levenberg-Marquardt iterations of the Newton fit."""
+    optimizer: Literal["gauss-newton", "paper"] = "gauss-newton"
+    """Newton fit: our Levenberg-Marquardt (default) or RigPI's own gradient scheme, for comparison."""
     vlm: str | None = None
     """OpenAI-compatible server asked for the material (e.g. http://127.0.0.1:8000/v1); key from TWIN_VLM_API_KEY.
     Any failure falls back to the offline prior."""
@@ -71,6 +73,8 @@ class Bench:
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
     seeds: int = 5
     """Noise draws per object (paper)."""
+    paper_optimizer: bool = False
+    """Also run RigPI's own optimizer on the same recordings (paper; adds about 20 s per draw)."""
     draws: int = 20
     """Noise draws per object (crlb)."""
     device: str = "cpu"
@@ -90,6 +94,7 @@ def _run_build(args: Build) -> None:
         BuildConfig(
             source=args.source, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
             name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
+            optimizer=args.optimizer,
             vlm=args.vlm, vlm_model=args.vlm_model,
         ),
         log=_log,
@@ -143,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 from twin.bench.paper import bench_paper
 
-                bench_paper(command.seeds)
+                bench_paper(command.seeds, paper_optimizer=command.paper_optimizer)
     except (ValueError, RuntimeError, OSError) as exc:
         print(f"twin: error: {exc}", file=sys.stderr)
         return 1

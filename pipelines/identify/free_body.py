@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
-from typing import Callable
+from typing import Callable, Literal
 
 import numpy as np
 
@@ -42,6 +42,12 @@ class IdentifyConfig:
     """lambda of the bound penalty (RigPI)."""
     max_iterations: int = 30
     """Levenberg-Marquardt iterations (each: one batched Jacobian by central differences)."""
+    optimizer: Literal["gauss-newton", "paper"] = "gauss-newton"
+    """gauss-newton: momentum-scaled loss, Levenberg-Marquardt with window corrections (default).
+    paper: RigPI's own scheme, for comparison: plain pose loss, gradient steps of ~1/100 of each
+    parameter's scale, windows started from the measured states."""
+    paper_iterations: int = 200
+    """Gradient steps of the paper optimizer."""
     device: str = "cpu"
 
 
@@ -107,8 +113,13 @@ def identify_free_body(
     t0 = time.perf_counter()
     rollout = FreeBodyRollout(windows, X_tracked_body, device=config.device)
     theta = theta_from_physical(start.mass, start.com, start.inertia_matrix())
-    weight = channel_weights(rollout.residuals(theta), windows.sample_count * windows.window_count)
-    theta, corr, rate, history = gauss_newton(rollout, theta, bounds, config, weight, progress)
+    if config.optimizer == "paper":
+        theta, history = paper_gradient_descent(rollout, theta, bounds, config, progress)
+        corr = rate = None
+        weight = np.full((windows.sample_count, 6), 1.0 / (windows.sample_count * windows.window_count))
+    else:
+        weight = channel_weights(rollout.residuals(theta), windows.sample_count * windows.window_count)
+        theta, corr, rate, history = gauss_newton(rollout, theta, bounds, config, weight, progress)
     covariance = window_robust_covariance(rollout, theta, corr, rate, weight)
     m, c, I = physical_from_theta(theta)
     return Identification(
@@ -256,3 +267,43 @@ def gauss_newton(rollout, theta, bounds: InertialBounds, config: IdentifyConfig,
     return theta, corr, rate, history
 
 
+
+
+def paper_gradient_descent(rollout, theta, bounds: InertialBounds, config: IdentifyConfig, progress=None):
+    """RigPI's refinement: the plain pose loss (mean squared position and rotation error) plus
+    lambda * P(theta, C), descended in the physical parameters (mass, COM, inertia), each step
+    moving every parameter by 1/100 of its scale against its gradient's sign; tape gradients;
+    windows from measured states.
+
+    Returns the best theta seen and the loss per step.
+    """
+    W, S = rollout.windows.window_count, rollout.windows.sample_count
+    weight = np.full((S, 6), 1.0 / (S * W))
+    flat = flat_physical(theta)
+    scale = np.abs(flat)
+    scale[1:4] = np.cbrt(flat[0] / 1000.0)  # COM: the body's size at water density [m]
+    scale[7:] = np.mean(scale[4:7])
+    best, best_loss, history = theta, np.inf, []
+    for step in range(config.paper_iterations):
+        loss, g_theta, _, _ = rollout.loss_and_grad(theta, None, None, weight, False)
+        flat = flat_physical(theta)
+        v, dv = bounds.violation(flat)
+        loss += config.penalty_weight * float(v @ v)
+        history.append(loss)
+        if progress:
+            progress(step + 1, loss)
+        if loss < best_loss:
+            best, best_loss = theta, loss
+        # d loss / d flat through the parameterisation: theta is a smooth function of the physical values
+        J = physical_jacobian(theta)  # d flat / d theta
+        g_flat = np.linalg.lstsq(J.T, g_theta, rcond=None)[0]
+        g_flat[:7] += config.penalty_weight * 2 * v * dv
+        direction = np.sign(g_flat)
+        for _ in range(20):
+            trial = flat - 0.01 * scale * direction
+            I = np.array([[trial[4], trial[7], trial[8]], [trial[7], trial[5], trial[9]], [trial[8], trial[9], trial[6]]])
+            if trial[0] > 0 and Inertial(trial[0], trial[1:4], I).physical_violation() is None:
+                theta = theta_from_physical(trial[0], trial[1:4], I)
+                break
+            direction = 0.5 * direction
+    return best, history

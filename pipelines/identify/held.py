@@ -19,7 +19,7 @@ from .free_body import Identification, IdentifyConfig, InertialBounds, identify_
 from .inertia import theta_from_physical
 from .least_squares import LeastSquaresResult, identify_least_squares
 from .rollout import FreeBodyRollout
-from .windows import concat_windows, make_windows
+from .windows import ShootingWindows, concat_windows, make_windows
 
 Method = Literal["newton", "ls"]
 
@@ -98,7 +98,7 @@ def identify_held(
     newton = None
     if method == "newton":
         start = _clip_into_bounds(ls.inertial, prior, bounds)
-        newton = identify_free_body(_windows(trials, config), X_tracked_body, start, bounds, config, progress)
+        newton = identify_free_body(windows_from_recordings(trials, config), X_tracked_body, start, bounds, config, progress)
         candidates["newton"] = newton.inertial
 
     fits, impulse, traces = _replay(holdout or trials[0], X_tracked_body, candidates, config)
@@ -117,7 +117,8 @@ def identify_held(
     )
 
 
-def _windows(recordings, config: IdentifyConfig):
+def windows_from_recordings(recordings, config: IdentifyConfig) -> ShootingWindows:
+    """Back-to-back shooting windows of every recording, batched."""
     return concat_windows(
         [
             make_windows(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s, r.wrench.force,
@@ -143,7 +144,7 @@ def _replay(recording, X_tracked_body: Pose, candidates: dict, config: IdentifyC
 
     Returns FitMetrics per candidate, its momentum-scaled RMS (position, rotation), and position traces.
     """
-    windows = _windows([recording], config)
+    windows = windows_from_recordings([recording], config)
     rollout = FreeBodyRollout(windows, X_tracked_body, device=config.device)
     t = windows.t_start_s[None, :] + windows.dt_s * windows.substeps * np.arange(1, windows.sample_count + 1)[:, None]
     measured = windows.measured_position[1:]

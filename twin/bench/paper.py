@@ -29,12 +29,16 @@ def paper_objects() -> dict:
     }
 
 
-def bench_paper(seeds: int = 5, duration_s: float = 10.0) -> list[dict]:
+def bench_paper(seeds: int = 5, duration_s: float = 10.0, paper_optimizer: bool = False) -> list[dict]:
     """Each paper object held and moved for `duration_s`, recorded with `seeds` noise draws at the ATI
-    sensor's resolution; identified through the MCAP files like a build; errors and spread per estimator."""
+    sensor's resolution; identified through the MCAP files like a build; errors and spread per estimator.
+
+    With `paper_optimizer`, RigPI's own scheme (plain pose loss, 1/100-scale gradient steps) also
+    runs on the same windows, started from the prior."""
     from assets import Inertial, Pose
     from assets.materials import material_range
-    from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
+    from pipelines.identify import IdentifyConfig, InertialBounds, identify_free_body, identify_held, tracked_to_object
+    from pipelines.identify.held import windows_from_recordings
     from pipelines.logs import PoseTrack, WrenchTrack, read_recording
     from pipelines.priors import uniform_density_prior
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
@@ -56,6 +60,8 @@ def bench_paper(seeds: int = 5, duration_s: float = 10.0) -> list[dict]:
             config = HeldMotionConfig(duration_s=duration_s)
             motions = {trial: simulate_held(truth, placement, grasp, config, motion_rng) for trial in ("trial", "heldout")}
             estimates = {"least_squares": [], "newton": [], "kept": []}
+            if paper_optimizer:
+                estimates["rigpi_scheme"] = []
             for seed in range(seeds):
                 noise_rng = np.random.default_rng(seed)
                 recordings = {}
@@ -71,6 +77,10 @@ def bench_paper(seeds: int = 5, duration_s: float = 10.0) -> list[dict]:
                 estimates["least_squares"].append((held.least_squares.inertial, held.least_squares.covariance))
                 estimates["newton"].append((held.newton.inertial, held.newton.covariance))
                 estimates["kept"].append((held.inertial, held.covariance))
+                if paper_optimizer:
+                    rigpi = identify_free_body(windows_from_recordings([recordings["trial"]], IdentifyConfig()), X, prior.inertial,
+                                               bounds, IdentifyConfig(optimizer="paper"))
+                    estimates["rigpi_scheme"].append((rigpi.inertial, rigpi.covariance))
             for estimator, values in estimates.items():
                 rows.append({"object": name, "estimator": estimator, **_spread(values, truth)})
     _print_paper_table(rows)
