@@ -65,14 +65,15 @@ class Bench:
     priors: RigPI's six objects: prior error (library, the paper's VLM answers, fusion) and whether C holds the truth.
     throughput: time per identification iteration for 1 and many objects batched, on --device.
     crlb: spread of the estimates over --draws noise draws against the Cramer-Rao bound.
+    mujoco: paper's recordings identified by mujoco.sysid (pseudo-inertia) and by ours, side by side.
     """
 
-    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb"]]
+    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
     seeds: int = 5
-    """Noise draws per object (paper)."""
+    """Noise draws per object (paper, mujoco)."""
     paper_optimizer: bool = False
     """Also run RigPI's own optimizer on the same recordings (paper; adds about 20 s per draw)."""
     draws: int = 20
@@ -141,6 +142,10 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.throughput import bench_throughput
 
                 bench_throughput(command.device, command.objects)
+            elif command.what == "mujoco":
+                from twin.bench.mujoco import bench_mujoco
+
+                bench_mujoco(command.seeds)
             elif command.what == "priors":
                 from twin.bench.priors import bench_priors
 
