@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
 __all__ = ["ConvexParts", "DecomposeConfig", "DecomposeError", "decompose"]
 
-_CACHE_FORMAT = 1
+_CACHE_FORMAT = 2
 
 
 class DecomposeError(RuntimeError):
@@ -71,6 +71,12 @@ class DecomposeConfig:
     """Part approximation: convex hulls ("ch") or boxes ("box")."""
     seed: int = 0
     """Random seed of CoACD's search: reruns give identical parts."""
+    max_input_faces: int = 3000
+    """Meshes with more faces are first simplified to this many (quadric decimation, kept only if
+    still watertight); 0 passes the mesh as it is. CoACD's time grows with the face count (a
+    scanned 3 cm cube: 14 s at 20 000 faces, 3.3 s at 2 000, union volume 1.025 and 1.018 of
+    the mesh); collision parts do not need the visual mesh's detail. Volumes and surface
+    deviation are measured against the mesh as given."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,7 +86,9 @@ class ConvexParts:
     parts: convex hulls (trimesh.Trimesh), each watertight with <= max_ch_vertex vertices.
     volume_union_m3: volume of the union of the parts [m^3] (overlaps counted once).
     volume_mesh_m3: volume of the input mesh [m^3].
-    stats: part count, hull vertex counts, timings [s], cache use; JSON-serialisable.
+    stats: part count, hull vertex counts, timings [s], cache use, and the surface deviation of
+      the union from the mesh: `surface_deviation_mean_m` / `_max_m`, the distance from points
+      spread over the mesh's surface to the union's surface [m]; JSON-serialisable.
     """
 
     parts: tuple["trimesh.Trimesh", ...]
@@ -117,9 +125,14 @@ def decompose(
         except (OSError, ValueError, KeyError):
             pass  # a damaged cache entry is recomputed and rewritten
 
-    parts, stats = _run_coacd(vertices, faces, config)
+    t0 = time.perf_counter()
+    v_in, f_in = _simplified(vertices, faces, config.max_input_faces)
+    simplify_s = time.perf_counter() - t0
+    parts, stats = _run_coacd(v_in, f_in, config)
+    stats.update(input_faces=int(len(f_in)), simplify_s=simplify_s)
     volume_mesh = float(mesh.volume)
-    volume_union = _union_volume(parts)
+    volume_union, deviation = _union_volume_and_deviation(parts, vertices, faces)
+    stats.update(deviation)
     stats.update(
         part_count=len(parts),
         hull_vertex_counts=[int(len(p.vertices)) for p in parts],
@@ -140,6 +153,8 @@ def _check(mesh, config: DecomposeConfig) -> None:
         raise DecomposeError(f"decompose: threshold {config.threshold} is outside CoACD's range [0.01, 1]")
     if config.max_ch_vertex < 4:
         raise DecomposeError(f"decompose: max_ch_vertex {config.max_ch_vertex} < 4 cannot bound a volume")
+    if config.max_input_faces < 0:
+        raise DecomposeError(f"decompose: max_input_faces must be >= 0, got {config.max_input_faces}")
     if config.max_convex_hull == 0 or config.max_convex_hull < -1:
         raise DecomposeError(f"decompose: max_convex_hull must be -1 or positive, got {config.max_convex_hull}")
     if not mesh.is_watertight:
@@ -159,6 +174,24 @@ def _cache_key(vertices: np.ndarray, faces: np.ndarray, config: DecomposeConfig)
     h.update(json.dumps(asdict(config), sort_keys=True).encode())
     h.update(f"coacd={coacd_version};format={_CACHE_FORMAT}".encode())
     return h.hexdigest()
+
+
+def _simplified(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh decimated to at most `max_faces` faces if that keeps it watertight, else as given."""
+    if max_faces <= 0 or len(faces) <= max_faces:
+        return vertices, faces
+    import open3d as o3d
+    import trimesh
+
+    shuffled = faces[np.random.default_rng(0).permutation(len(faces))]  # Open3D is slow on sorted faces
+    legacy = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(shuffled))
+    simple = legacy.simplify_quadric_decimation(target_number_of_triangles=int(max_faces))
+    out = trimesh.Trimesh(np.asarray(simple.vertices), np.asarray(simple.triangles), process=True)
+    out.update_faces(out.nondegenerate_faces())
+    out.remove_unreferenced_vertices()
+    if not (out.is_watertight and out.is_winding_consistent and out.volume > 0):
+        return vertices, faces
+    return np.ascontiguousarray(out.vertices, dtype=np.float64), np.ascontiguousarray(out.faces, dtype=np.int64)
 
 
 def _run_coacd(vertices: np.ndarray, faces: np.ndarray, config: DecomposeConfig) -> tuple[list, dict]:
@@ -233,16 +266,29 @@ def _reduce_hull(hull, max_vertices: int):
     return _hull(v[chosen])  # at most max_vertices points, so at most that many hull vertices
 
 
-def _union_volume(parts: list) -> float:
+def _union_volume_and_deviation(parts: list, vertices: np.ndarray, faces: np.ndarray) -> tuple[float, dict]:
+    """Volume of the parts' union [m^3], and how far the mesh's surface lies from the union's [m]."""
     import trimesh
 
-    if len(parts) == 1:
-        return float(parts[0].volume)
+    union = None
     try:
-        union = trimesh.boolean.union(parts, engine="manifold")
-        return float(union.volume)
+        union = parts[0] if len(parts) == 1 else trimesh.boolean.union(parts, engine="manifold")
+        volume = float(union.volume)
     except Exception:  # noqa: BLE001 - the union is a statistic; fall back to the sum (an upper bound)
-        return float(sum(p.volume for p in parts))
+        volume = float(sum(p.volume for p in parts))
+    deviation = {}
+    if union is not None and len(union.faces):
+        import open3d as o3d
+
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        points, _ = trimesh.sample.sample_surface_even(mesh, 5000, seed=0)
+        scene = o3d.t.geometry.RaycastingScene()
+        scene.add_triangles(
+            o3d.core.Tensor(np.asarray(union.vertices, np.float32)), o3d.core.Tensor(np.asarray(union.faces, np.uint32))
+        )
+        d = scene.compute_distance(o3d.core.Tensor(np.asarray(points, np.float32))).numpy()
+        deviation = {"surface_deviation_mean_m": float(d.mean()), "surface_deviation_max_m": float(d.max())}
+    return volume, deviation
 
 
 def _save(path: Path, parts: list, volume_union: float, volume_mesh: float, stats: dict) -> None:

@@ -22,7 +22,7 @@ import numpy as np
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["RenderConfig", "render_scan"]
+__all__ = ["RenderConfig", "look_at", "render_mesh_image", "render_scan"]
 
 
 @dataclass(frozen=True)
@@ -208,11 +208,13 @@ def _jsonable(d: dict) -> dict:
     return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
 
-def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Camera-to-world in OpenCV axes (z forward, y down), world z up."""
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Camera-to-world [m] in OpenCV axes (z forward, y down) for a camera at `eye` looking at `target`,
+    with `up` (world, default +z) pointing up in the image."""
+    eye, target = np.asarray(eye, float), np.asarray(target, float)
     z = target - eye
     z /= np.linalg.norm(z)
-    x = np.cross(z, [0.0, 0.0, 1.0])
+    x = np.cross(z, np.asarray(up, float))
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     T = np.eye(4)
@@ -233,7 +235,7 @@ def _camera_poses(config: RenderConfig, centre: np.ndarray, rng: np.random.Gener
             el = np.deg2rad(elevation)
             eye = centre + distance * np.array([np.cos(el) * np.cos(azimuth), np.cos(el) * np.sin(azimuth), np.sin(el)])
             target = centre + rng.normal(0.0, config.look_at_jitter_m, 3)
-            poses.append(_look_at(eye, target))
+            poses.append(look_at(eye, target))
     return poses
 
 
@@ -286,18 +288,81 @@ def _shade(
     rng: np.random.Generator,
 ) -> np.ndarray:
     """Lambertian colour image (uint8 HxWx3): a key light from above, a headlight, ambient."""
-    key = np.array([0.3, 0.2, 0.93])
+    key = np.array([0.3, 0.2, 0.93], dtype=np.float32)
     key /= np.linalg.norm(key)
-    facing = np.where(np.einsum("hwk,hwk->hw", normals, unit_dirs)[..., None] > 0, -normals, normals)
-    light = 0.25 + 0.45 * np.clip(facing @ key, 0, None) + 0.3 * np.abs(np.einsum("hwk,hwk->hw", normals, unit_dirs))
-    p = points / 0.01  # texture coordinates in centimetres, fixed to the world
+    n, d = normals[valid].astype(np.float32), unit_dirs[valid].astype(np.float32)  # shade hits only
+    cos = np.einsum("nk,nk->n", n, d)
+    facing = np.where((cos > 0)[:, None], -n, n)
+    light = 0.25 + 0.45 * np.clip(facing @ key, 0, None) + 0.3 * np.abs(cos)
+    p = points[valid].astype(np.float32) / np.float32(0.01)  # texture coordinates in centimetres, fixed to the world
     texture = (
-        np.sin(p[..., 0] * 1.3 + np.sin(p[..., 1] * 0.7))
-        + np.sin(p[..., 1] * 1.7 + np.sin(p[..., 2] * 0.9))
-        + np.sin(p[..., 2] * 2.1 + np.sin(p[..., 0] * 1.1))
+        np.sin(p[:, 0] * 1.3 + np.sin(p[:, 1] * 0.7))
+        + np.sin(p[:, 1] * 1.7 + np.sin(p[:, 2] * 0.9))
+        + np.sin(p[:, 2] * 2.1 + np.sin(p[:, 0] * 1.1))
     ) / 3.0
-    albedo = np.where(is_object[..., None], np.array(config.object_rgb, float), np.array(config.table_rgb, float))
-    color = albedo * (light * (1.0 + config.texture_amplitude * texture))[..., None]
-    color = np.where(valid[..., None], color, 40.0)  # dark background where rays escape
-    color += config.color_noise * rng.standard_normal(color.shape)
+    albedo = np.where(
+        is_object[valid][:, None], np.array(config.object_rgb, np.float32), np.array(config.table_rgb, np.float32)
+    )
+    color = np.full(valid.shape + (3,), 40.0, dtype=np.float32)  # dark background where rays escape
+    color[valid] = albedo * (light * (1.0 + config.texture_amplitude * texture))[:, None]
+    color += np.float32(config.color_noise) * rng.standard_normal(color.shape, dtype=np.float32)
     return np.clip(np.rint(color), 0, 255).astype(np.uint8)
+
+
+def render_mesh_image(
+    mesh: "trimesh.Trimesh",
+    path: Path,
+    T_world_camera: np.ndarray | None = None,
+    width: int = 960,
+    height: int = 720,
+    fov_deg: float = 60.0,
+    rgb: tuple[int, int, int] = (200, 200, 205),
+) -> Path:
+    """Raytrace a shaded picture of a mesh (a headlight and a key light, white background) to a PNG.
+
+    Args:
+        mesh: trimesh.Trimesh [m]; need not be watertight.
+        path: the PNG to write (parent directories are created).
+        T_world_camera: camera-to-world, OpenCV axes; None looks at the mesh's centre from
+            azimuth 35 deg, elevation 30 deg (world z up), far enough to frame it.
+        width, height: image size [pixels]. fov_deg: horizontal field of view [deg].
+        rgb: surface albedo, 8-bit.
+
+    Returns:
+        path.
+    """
+    import open3d as o3d
+    from PIL import Image
+
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    f = 0.5 * width / np.tan(np.deg2rad(fov_deg) / 2)
+    if T_world_camera is None:
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        centre, radius = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo)
+        distance = radius / np.sin(np.deg2rad(min(fov_deg, fov_deg * height / width)) / 2) * 1.05
+        az, el = np.deg2rad(35.0), np.deg2rad(30.0)
+        eye = centre + distance * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        T_world_camera = look_at(eye, centre)
+    T = np.asarray(T_world_camera, float)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32))
+    )
+    u, v = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    rays_camera = np.stack([(u - width / 2) / f, (v - height / 2) / f, np.ones_like(u)], axis=-1)
+    directions = rays_camera @ T[:3, :3].T
+    rays = np.concatenate([np.broadcast_to(T[:3, 3], directions.shape), directions], axis=-1).astype(np.float32)
+    hit = scene.cast_rays(o3d.core.Tensor(rays))
+    valid = np.isfinite(hit["t_hit"].numpy())
+    normals = hit["primitive_normals"].numpy().astype(np.float64)
+    unit = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+    head = np.abs(np.einsum("hwk,hwk->hw", normals, unit))
+    key = T[:3, :3] @ np.array([-0.4, -0.6, -0.7])  # from the upper left, in camera terms
+    key /= np.linalg.norm(key)
+    facing = np.where((np.einsum("hwk,hwk->hw", normals, unit) > 0)[..., None], -normals, normals)
+    light = 0.15 + 0.55 * head + 0.3 * np.clip(facing @ -key, 0, None)
+    color = np.where(valid[..., None], np.array(rgb, float) * light[..., None], 255.0)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(np.clip(np.rint(color), 0, 255).astype(np.uint8)).save(path)
+    return path

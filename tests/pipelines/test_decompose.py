@@ -35,6 +35,7 @@ def test_l_shape_splits_into_bounded_convex_parts(tmp_path):
     _check_parts(result, config)
     assert result.volume_mesh_m3 == pytest.approx(mesh.volume)
     assert result.volume_union_m3 == pytest.approx(mesh.volume, rel=0.02)
+    assert result.stats["surface_deviation_mean_m"] < 2e-4 and result.stats["surface_deviation_max_m"] < 2e-3
     assert result.stats["cache"] == "miss"
 
 
@@ -72,6 +73,7 @@ def test_hull_vertex_limit_is_enforced():
     assert all(len(p.vertices) <= 20 for p in result.parts)
     assert result.stats["reduced_hulls"] >= 1
     assert 0.5 < result.volume_union_m3 / result.volume_mesh_m3 <= 1.0 + 1e-9  # inside the sphere
+    assert 0 < result.stats["surface_deviation_mean_m"] < result.stats["surface_deviation_max_m"] < 0.005
 
 
 def test_open_mesh_is_rejected():
@@ -80,3 +82,15 @@ def test_open_mesh_is_rejected():
     box.update_faces(np.arange(len(box.faces)) > 0)
     with pytest.raises(DecomposeError, match="watertight"):
         decompose(box, DecomposeConfig(), None)
+
+
+def test_dense_mesh_is_simplified_before_coacd():
+    """A 5120-face ball goes to CoACD as at most max_input_faces faces; volumes refer to the mesh as given."""
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=0.02)
+    result = decompose(ball, DecomposeConfig(max_input_faces=500), None)
+    assert result.stats["input_faces"] <= 500
+    assert result.volume_mesh_m3 == pytest.approx(ball.volume)
+    assert 0.8 < result.volume_union_m3 / result.volume_mesh_m3 <= 1.0 + 1e-9  # one hull of <= 60 vertices
+    assert result.stats["surface_deviation_mean_m"] < 1e-3
+    untouched = decompose(ball, DecomposeConfig(max_input_faces=0, max_convex_hull=1), None)
+    assert untouched.stats["input_faces"] == len(ball.faces)

@@ -93,7 +93,8 @@ def test_pose_errors_ignore_the_world_frame_and_find_a_perturbation():
     turned = estimated.copy()
     turned[3, :3, :3] = turned[3, :3, :3] @ Rotation.from_euler("z", 2, degrees=True).as_matrix()
     errors = pose_errors(turned, given)
-    assert errors.absolute_rotation_deg[3] == pytest.approx(2.0, abs=1e-6)
+    assert 1.5 < errors.absolute_rotation_deg[3] <= 2.0  # the alignment takes a sixth of it on the others
+    assert np.delete(errors.absolute_rotation_deg, 3).max() < 0.4
     np.testing.assert_allclose(errors.relative_rotation_deg[2:4], 2.0, atol=1e-6)
     with pytest.raises(ValueError, match="one shape"):
         pose_errors(given[:3], given)

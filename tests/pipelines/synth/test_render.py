@@ -9,7 +9,7 @@ import trimesh
 from PIL import Image
 
 from pipelines.scan import read_scan
-from pipelines.synth.render import RenderConfig, render_scan
+from pipelines.synth.render import RenderConfig, look_at, render_mesh_image, render_scan
 
 SMALL = RenderConfig(width=160, height=120, fx=150.0, fy=150.0, view_count=4, elevations_deg=(40.0, 60.0))
 
@@ -53,3 +53,15 @@ def test_same_seed_gives_identical_files(tmp_path):
     b = render_scan(_cube(), tmp_path / "b", SMALL, np.random.default_rng(3))
     for name in ("depth/frame_00000.png", "depth/frame_00003.png", "transforms.json"):
         assert (a / name).read_bytes() == (b / name).read_bytes()
+
+
+def test_mesh_picture_frames_the_mesh(tmp_path):
+    """render_mesh_image writes a PNG of the asked size: shaded object in the middle, white around it."""
+    path = render_mesh_image(_cube(), tmp_path / "pics" / "cube.png", width=120, height=90)
+    image = np.asarray(Image.open(path).convert("RGB"))
+    assert image.shape == (90, 120, 3)
+    assert (image[0, 0] == 255).all() and (image[-1, -1] == 255).all()
+    assert (image[45, 60] < 250).all()
+    camera = look_at((0.2, -0.3, 0.3), (0.2, 0.1, 0.02))
+    np.testing.assert_allclose(camera[:3, :3].T @ camera[:3, :3], np.eye(3), atol=1e-12)
+    assert render_mesh_image(_cube(), tmp_path / "other.png", camera, width=40, height=30).is_file()
