@@ -1,0 +1,58 @@
+"""Tests of twin.bench.reconstruct's pieces: truth meshes from CAD shells, Chamfer distance, the summary."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from twin.bench.reconstruct import _chamfer, _rest, _summarise, _watertight_from_mm
+
+
+def test_overlapping_open_shells_become_one_watertight_solid(tmp_path):
+    """Two overlapping boxes in mm, one open where it enters the other, become one closed surface of their union [m]."""
+    a = trimesh.creation.box((40.0, 20.0, 20.0))
+    b = trimesh.creation.box((20.0, 20.0, 40.0))
+    b.apply_translation((10.0, 0.0, 20.0))  # its bottom (z = 0) lies inside a
+    b.update_faces(b.face_normals[:, 2] > -0.5)  # an open shell, as CAD exports leave them
+    path = tmp_path / "part.ply"
+    trimesh.util.concatenate([a, b]).export(path)
+    mesh = _watertight_from_mm(path, cells=120)
+    union_m3 = (40 * 20 * 20 + 20 * 20 * 30) * 1e-9
+    assert mesh.is_watertight and mesh.volume == pytest.approx(union_m3, rel=0.04)
+    np.testing.assert_allclose(mesh.extents, (0.04, 0.02, 0.05), atol=1e-3)
+    assert len(mesh.split(only_watertight=False)) == 1
+
+
+def test_chamfer_of_a_grown_sphere_is_the_growth():
+    """The Chamfer distance between spheres of radius 20 and 20.5 mm is 0.5 mm, and 0 to itself."""
+    a = trimesh.creation.icosphere(subdivisions=5, radius=0.02)
+    b = trimesh.creation.icosphere(subdivisions=5, radius=0.0205)
+    assert _chamfer(a, b, count=4000) == pytest.approx(0.0005, rel=0.05)
+    assert _chamfer(a, a, count=4000) < 1e-5
+
+
+def test_rest_puts_a_box_flat_on_the_table():
+    """A box standing on its small face is laid on a large one, on z = 0."""
+    box = trimesh.creation.box((0.02, 0.04, 0.1))
+    placed = _rest(box)
+    assert placed.bounds[0, 2] == pytest.approx(0.0, abs=1e-9)
+    assert placed.extents[2] == pytest.approx(0.02, abs=1e-6)
+
+
+def test_summary_splits_by_size_and_counts_targets():
+    """Objects under 5 cm are summarised apart; the worst object and the count within target are given."""
+    rows = [
+        {"object": "a", "size_m": 0.10, "noise": "low", "volume_error_pct": 1.0, "chamfer_mm": 0.2, "com_shift_mm": 0.1,
+         "tsdf_ms_per_frame": 20.0, "decompose_s": 5.0},
+        {"object": "b", "size_m": 0.30, "noise": "low", "volume_error_pct": -5.0, "chamfer_mm": 0.5, "com_shift_mm": 2.0,
+         "tsdf_ms_per_frame": 30.0},
+        {"object": "c", "size_m": 0.03, "noise": "low", "volume_error_pct": 9.0, "chamfer_mm": 0.1, "com_shift_mm": 0.1,
+         "tsdf_ms_per_frame": 25.0},
+    ]
+    summary = _summarise(rows)
+    large = summary["size >= 5 cm, low noise"]
+    assert large["objects"] == 2 and large["volume_error_pct"]["worst"] == "b"
+    assert large["volume_error_pct"]["within_target"] == 1 and large["com_shift_mm"]["max"] == 2.0
+    assert summary["size < 5 cm, low noise"]["volume_error_pct"]["max"] == 9.0
+    assert summary["tsdf_ms_per_frame"]["max"] == 30.0 and summary["decompose_s"]["median"] == 5.0

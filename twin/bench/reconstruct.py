@@ -1,0 +1,402 @@
+"""`twin bench reconstruct`: scan -> watertight mesh -> convex parts against known truth, and real Kinect frames.
+
+Synthetic part: real meshes (the workshop tools, converted from mm and made
+watertight; the MIT push shapes) and primitives are placed on a table in a
+stable resting pose, rendered as 24-view 640x480 RGB-D scans (`render_scan`)
+at two depth-noise levels, and reconstructed (`reconstruct`, default settings,
+with masks). Against the true mesh: volume error, Chamfer distance (mean of the
+two mean point-to-surface distances), shift of the uniform-density centre of
+mass, TSDF time per frame; and CoACD decomposition time at default settings,
+with the parts' union volume and surface deviation.
+
+Real part: the 100 Kinect frames of `rgbd/7scenes_tsdf_demo_subset` fused with
+their given poses into a scene mesh, pictured; then posed without their poses
+(`pipelines.posing`) and compared with the given ones, and fused again.
+
+Truth for the workshop tools: the CAD meshes are unions of overlapping,
+partly open part shells, so each is rebuilt as one watertight surface
+(occupancy by flood fill from outside on a grid of 1/300 of its extent,
+smoothed, marching cubes); that surface is both what is rendered and what is
+measured against. Thin features below ~1 mm (the caliper's jaw tips) are lost.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+DATA_ROOT = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+"""../shared/data beside the repository."""
+
+NOISE_LEVELS = {"low": (0.5e-3, 1.5e-3), "high": (1.5e-3, 4.5e-3)}
+"""Depth noise sigma(z) = a + c z^2 per level: (a [m], c [1/m]); 0.74 / 2.2 mm at 0.4 m."""
+
+TARGETS = {"volume_error_pct": 3.0, "chamfer_mm": 1.0, "com_shift_mm": 1.5, "tsdf_ms_per_frame": 60.0,
+           "decompose_s": 30.0}
+"""Acceptance targets (issue 4): objects of 5 cm and larger; TSDF per 640x480 frame; CoACD per object."""
+
+WORKSHOP_TOOLS = ("Adjustable Wrench", "Allen Key", "Electronic Caliper", "Hammer", "Rubber Mallet", "Screwdriver")
+MIT_PUSH_SHAPES = ("rect1", "tri1", "ellip1", "hex", "butter")
+PRIMITIVES = ("cube", "sphere", "cylinder")
+PRIMITIVE_SIZES_M = (0.03, 0.05, 0.10, 0.30)
+
+
+@dataclass(frozen=True)
+class _Case:
+    name: str
+    family: str
+    make: Callable  # () -> trimesh.Trimesh [m], resting on z = 0
+    decompose: bool  # time CoACD on its (low-noise) reconstruction
+
+
+def bench_reconstruct(
+    quick: bool = False, out_dir: Path = Path("out/bench/reconstruct"), data_root: Path = DATA_ROOT
+) -> dict:
+    """Run the synthetic and the real benchmarks; print tables; write results.json and pictures to `out_dir`.
+
+    Args:
+        quick: a subset (5 objects, 30 Kinect frames for the pose-free path) that runs in about a minute.
+        out_dir: where results.json and the pictures go (printed).
+        data_root: the shared data folder (workshop-tools/, mit-push/, rgbd/).
+
+    Returns:
+        The results, as written to results.json.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    cases = _cases(data_root, quick)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in cases:
+            truth = case.make()
+            for noise in NOISE_LEVELS:
+                rows.append(_run_case(case, truth, noise, Path(tmp), decompose=case.decompose and noise == "low"))
+                _print_row(rows[-1], header=len(rows) == 1)
+    summary = _summarise(rows)
+    _print_summary(summary)
+    real = _run_kinect(data_root, out_dir, quick)
+    results = {"synthetic": rows, "summary": summary, "kinect": real, "total_s": time.perf_counter() - t0,
+               "quick": quick}
+    (out_dir / "results.json").write_text(json.dumps(results, indent=1, default=_plain))
+    print(f"results: {out_dir / 'results.json'}  (total {results['total_s']:.0f} s)")
+    return results
+
+
+# ---------------------------------------------------------------------------------------------
+# the objects
+
+
+def _cases(data_root: Path, quick: bool) -> list[_Case]:
+    cases = []
+    prims = (("cube", 0.03), ("cube", 0.10), ("sphere", 0.05)) if quick else [
+        (p, s) for p in PRIMITIVES for s in PRIMITIVE_SIZES_M]
+    for kind, size in prims:  # CoACD's time does not depend on scale: one size per primitive
+        make = lambda k=kind, s=size: _primitive(k, s)  # noqa: E731
+        cases.append(_Case(f"{kind} {size * 100:g} cm", "primitive", make, decompose=size == 0.10))
+    tools_dir = data_root / "workshop-tools" / "data" / "Workshop Tools Dataset"
+    push_dir = data_root / "mit-push" / "meshes" / "mit_push_objects_stl"
+    tools = ("Hammer",) if quick else WORKSHOP_TOOLS
+    shapes = ("tri1",) if quick else MIT_PUSH_SHAPES
+    for tool in tools:
+        path = tools_dir / tool / "mesh.ply"
+        if path.is_file():
+            cases.append(_Case(tool, "workshop-tools", lambda p=path: _rest(_watertight_from_mm(p)), decompose=True))
+    for shape in shapes:
+        path = push_dir / f"StainlessSteel_{shape}.stl"
+        if path.is_file():
+            cases.append(_Case(f"mit-push {shape}", "mit-push", lambda p=path: _rest(_load(p)), decompose=True))
+    return cases
+
+
+def _plain(value):
+    """numpy scalars and arrays for json."""
+    return value.tolist() if hasattr(value, "tolist") else str(value)
+
+
+def _primitive(kind: str, size: float):
+    import trimesh
+
+    if kind == "cube":
+        mesh = trimesh.creation.box((size,) * 3)
+    elif kind == "sphere":
+        mesh = trimesh.creation.icosphere(subdivisions=4, radius=size / 2)
+    else:
+        mesh = trimesh.creation.cylinder(radius=size / 2, height=size, sections=96)
+    return _place(mesh)
+
+
+def _load(path: Path):
+    import trimesh
+
+    mesh = trimesh.load(path, force="mesh")
+    if not mesh.is_watertight:
+        raise RuntimeError(f"{path}: not watertight")
+    return mesh
+
+
+def _watertight_from_mm(path: Path, cells: int = 300):
+    """The CAD mesh [mm] as one watertight surface [m]: outside found by flood fill on a grid."""
+    import open3d as o3d
+    import trimesh
+    from scipy import ndimage
+    from skimage import measure
+
+    mesh = trimesh.load(path, force="mesh")
+    mesh.apply_scale(0.001)  # the Workshop Tools meshes are in millimetres
+    lo, hi = mesh.bounds
+    h = float((hi - lo).max()) / cells
+    lo, hi = lo - 4 * h, hi + 4 * h
+    axes = [np.arange(a, b + h, h) for a, b in zip(lo, hi)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).astype(np.float32)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)), o3d.core.Tensor(np.asarray(mesh.faces, np.uint32))
+    )
+    shell = scene.compute_distance(o3d.core.Tensor(grid)).numpy() < 0.5 * np.sqrt(3) * h
+    labels, _ = ndimage.label(~shell)
+    faces_of_box = [labels[0], labels[-1], labels[:, 0], labels[:, -1], labels[:, :, 0], labels[:, :, -1]]
+    border = np.unique(np.concatenate([f.ravel() for f in faces_of_box]))
+    outside = np.isin(labels, border[border > 0])
+    occupancy = np.where(outside, 0.0, np.where(shell, 0.5, 1.0)).astype(np.float32)
+    occupancy = ndimage.gaussian_filter(occupancy, 0.7)
+    v, f, _, _ = measure.marching_cubes(occupancy, 0.5, spacing=(h, h, h))
+    out = trimesh.Trimesh(v + lo, f, process=True)
+    out = max(out.split(only_watertight=True), key=lambda p: len(p.faces))
+    trimesh.repair.fix_normals(out)
+    return out
+
+
+def _rest(mesh):
+    """The mesh in its most probable stable resting pose, turned 20 deg about z, placed on z = 0."""
+    import trimesh
+
+    transforms, probabilities = trimesh.poses.compute_stable_poses(mesh)
+    mesh = mesh.copy()
+    mesh.apply_transform(transforms[int(np.argmax(probabilities))])
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(np.deg2rad(20.0), (0, 0, 1)))
+    return _place(mesh)
+
+
+def _place(mesh):
+    """Resting on z = 0 with its box centred at (0.3, -0.1): away from the world origin on purpose."""
+    lo, hi = mesh.bounds
+    mesh.apply_translation((0.3 - 0.5 * (lo[0] + hi[0]), -0.1 - 0.5 * (lo[1] + hi[1]), -lo[2]))
+    return mesh
+
+
+# ---------------------------------------------------------------------------------------------
+# one synthetic case
+
+
+def _render_config(size: float, noise: str):
+    from pipelines.synth.render import RenderConfig
+
+    base, quadratic = NOISE_LEVELS[noise]
+    near = max(0.35, 1.6 * size)  # keep a 30 cm object in the 640x480 frame
+    return RenderConfig(
+        distance_range_m=(near, near + 0.15),
+        depth_noise_base_m=base,
+        depth_noise_quadratic_per_m=quadratic,
+        table_size_m=(max(0.3, 2.5 * size),) * 2,
+    )
+
+
+def _run_case(case: _Case, truth, noise: str, tmp: Path, decompose: bool) -> dict:
+    from pipelines.decompose import DecomposeConfig
+    from pipelines.decompose import decompose as run_decompose
+    from pipelines.reconstruct import ReconstructError, reconstruct
+    from pipelines.scan import read_scan
+    from pipelines.synth.render import render_scan
+
+    size = float(truth.extents.max())
+    root = tmp / f"{case.name.replace(' ', '_')}-{noise}"
+    t0 = time.perf_counter()
+    render_scan(truth, root, _render_config(size, noise), np.random.default_rng(0), case.name)
+    render_s = time.perf_counter() - t0
+    row = {"object": case.name, "family": case.family, "size_m": size, "noise": noise, "render_s": render_s}
+    try:
+        rec = reconstruct(read_scan(root))
+    except ReconstructError as e:
+        row["error"] = str(e)
+        return row
+    mesh = rec.mesh
+    row.update(
+        volume_error_pct=100.0 * (mesh.volume / truth.volume - 1.0),
+        chamfer_mm=1000.0 * _chamfer(mesh, truth),
+        com_shift_mm=1000.0 * float(np.linalg.norm(mesh.center_mass - truth.center_mass)),
+        tsdf_ms_per_frame=1000.0 * rec.stats["tsdf_s_per_frame"],
+        reconstruct_s=rec.stats["total_s"],
+        voxel_mm=1000.0 * rec.voxel_size_m,
+        faces=len(mesh.faces),
+    )
+    if decompose:
+        t1 = time.perf_counter()
+        parts = run_decompose(mesh, DecomposeConfig(), cache_dir=None)
+        row.update(
+            decompose_s=time.perf_counter() - t1,
+            part_count=len(parts.parts),
+            union_volume_ratio=parts.volume_union_m3 / parts.volume_mesh_m3,
+            union_deviation_mean_mm=1000.0 * parts.stats.get("surface_deviation_mean_m", float("nan")),
+        )
+    return row
+
+
+def _chamfer(a, b, count: int = 20000) -> float:
+    """Symmetric Chamfer distance [m]: the mean of mean point-to-surface distances both ways."""
+    import open3d as o3d
+    import trimesh
+
+    def one_way(src, dst) -> float:
+        points, _ = trimesh.sample.sample_surface(src, count, seed=1)
+        scene = o3d.t.geometry.RaycastingScene()
+        scene.add_triangles(
+            o3d.core.Tensor(np.asarray(dst.vertices, np.float32)), o3d.core.Tensor(np.asarray(dst.faces, np.uint32))
+        )
+        return float(scene.compute_distance(o3d.core.Tensor(np.asarray(points, np.float32))).numpy().mean())
+
+    return 0.5 * (one_way(a, b) + one_way(b, a))
+
+
+# ---------------------------------------------------------------------------------------------
+# the real Kinect frames
+
+
+def _run_kinect(data_root: Path, out_dir: Path, quick: bool) -> dict:
+    from pipelines.posing import pose_errors
+    from pipelines.reconstruct import SceneConfig, reconstruct_scene
+    from pipelines.scan import read_scan
+
+    root = data_root / "rgbd" / "7scenes_tsdf_demo_subset"
+    if not root.is_dir():
+        print(f"kinect: {root} not found; skipped")
+        return {}
+    out: dict = {}
+    scan = read_scan(root)
+    config = SceneConfig(voxel_size_m=0.01)
+    scene = reconstruct_scene(scan, config)
+    picture = _picture(scene.mesh, scan, out_dir / "kinect_given_poses.png")
+    out["given_poses"] = {"frames": len(scan.frames), **scene.stats, "picture": str(picture)}
+    print(f"\nkinect, given poses: {len(scan.frames)} frames fused at {config.voxel_size_m * 1000:g} mm, "
+          f"{scene.stats['tsdf_s_per_frame'] * 1000:.1f} ms per 640x480 frame, {scene.stats['faces']} faces, "
+          f"extent {scene.stats['extent_m']} m; picture: {picture}")
+
+    if quick:  # the first 30 frames
+        scan = read_scan(_subset(root, out_dir / "kinect_subset", 30))
+    t0 = time.perf_counter()
+    posed = read_scan(scan.root, poses="estimate")
+    posing_s = time.perf_counter() - t0
+    estimated = np.array([f.T_world_camera for f in posed.frames])
+    errors = pose_errors(estimated, posed.given_T_world_camera)
+    summary = errors.summary()
+    # the given world, for the picture: the estimated poses moved by the aligning transform
+    align = posed.given_T_world_camera[0] @ np.linalg.inv(estimated[0])
+    scene_free = reconstruct_scene(posed, config)
+    picture_free = _picture(scene_free.mesh, scan, out_dir / "kinect_estimated_poses.png", align)
+    path_m = float(np.linalg.norm(np.diff(posed.given_T_world_camera[:, :3, 3], axis=0), axis=1).sum())
+    out["estimated_poses"] = {"frames": len(posed.frames), "posing_s": posing_s, "path_length_m": path_m,
+                              "errors": summary, "stats": posed.pose_stats, "picture": str(picture_free)}
+    r, t = summary["relative_rotation_deg"], summary["relative_translation_m"]
+    ar, at = summary["absolute_rotation_deg"], summary["absolute_translation_m"]
+    print(f"kinect, pose-free: {len(posed.frames)} frames posed in {posing_s:.1f} s (camera path {path_m:.2f} m)")
+    print(f"  frame-to-frame error: rotation median {r['median']:.2f} max {r['max']:.2f} deg, "
+          f"translation median {1000 * t['median']:.1f} max {1000 * t['max']:.1f} mm")
+    print(f"  absolute error after rigid alignment: rotation median {ar['median']:.2f} max {ar['max']:.2f} deg, "
+          f"translation median {1000 * at['median']:.1f} max {1000 * at['max']:.1f} mm, rms {1000 * at['rms']:.1f} mm")
+    print(f"  picture (fused with the estimated poses): {picture_free}")
+    return out
+
+
+def _subset(root: Path, dest: Path, count: int) -> Path:
+    """A folder of symbolic links to the first `count` frames."""
+    dest.mkdir(parents=True, exist_ok=True)
+    names = ["camera-intrinsics.txt"] + [
+        f"{p.name[: -len('.depth.png')]}.{s}" for p in sorted(root.glob("frame-*.depth.png"))[:count]
+        for s in ("color.jpg", "depth.png", "pose.txt")
+    ]
+    for name in names:
+        link = dest / name
+        if not link.exists():
+            link.symlink_to(root / name)
+    return dest
+
+
+def _picture(mesh, scan, path: Path, align: np.ndarray | None = None) -> Path:
+    """The scene seen from behind the middle frame's camera (1 m back), in the given poses' world."""
+    from pipelines.synth.render import render_mesh_image
+
+    mesh = mesh.copy()
+    if align is not None:
+        mesh.apply_transform(align)
+    T = np.array(scan.frames[len(scan.frames) // 2].T_world_camera, float)
+    T[:3, 3] -= 1.0 * T[:3, 2]
+    return render_mesh_image(mesh, path, T, fov_deg=70.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# tables
+
+
+_COLUMNS = (  # key, header, format (its width is the header's)
+    ("object", "object              ", "{:<20}"), ("size_m", "size m", "{:6.3f}"), ("noise", "noise", "{:<5}"),
+    ("volume_error_pct", "volume %", "{:+8.2f}"), ("chamfer_mm", "chamfer", "{:7.3f}"),
+    ("com_shift_mm", " COM mm", "{:7.3f}"), ("tsdf_ms_per_frame", "TSDF ms", "{:7.1f}"), ("voxel_mm", "voxel", "{:5.2f}"),
+    ("decompose_s", "CoACD s", "{:7.2f}"), ("part_count", "parts", "{:5d}"), ("union_volume_ratio", "union", "{:5.3f}"),
+)
+
+
+def _print_row(row: dict, header: bool) -> None:
+    if header:
+        print(" ".join(h for _, h, _ in _COLUMNS))
+    if "error" in row:
+        print(f"{row['object']:<20} {row['size_m']:6.3f} {row['noise']:<5} FAILED: {row['error']}", flush=True)
+        return
+    print(" ".join(fmt.format(row[k]) if k in row else " " * len(h) for k, h, fmt in _COLUMNS), flush=True)
+
+
+def _summarise(rows: list[dict]) -> dict:
+    """Median and worst of each figure, for objects >= 5 cm and smaller ones, per noise level."""
+    out: dict = {}
+    for group, keep in (("size >= 5 cm", lambda r: r["size_m"] >= 0.0495), ("size < 5 cm", lambda r: r["size_m"] < 0.0495)):
+        for noise in NOISE_LEVELS:
+            sel = [r for r in rows if keep(r) and r["noise"] == noise]
+            if not sel:
+                continue
+            entry = {"objects": len(sel), "failed": sum("error" in r for r in sel)}
+            for key in ("volume_error_pct", "chamfer_mm", "com_shift_mm"):
+                values = [abs(r[key]) for r in sel if key in r]
+                if values:
+                    worst = max(sel, key=lambda r: abs(r.get(key, 0.0)))
+                    entry[key] = {"median": statistics.median(values), "max": max(values), "worst": worst["object"],
+                                  "within_target": sum(v <= TARGETS[key] for v in values)}
+            out[f"{group}, {noise} noise"] = entry
+    for key in ("tsdf_ms_per_frame", "decompose_s"):
+        values = [r[key] for r in rows if key in r]
+        if values:
+            out[key] = {"median": statistics.median(values), "max": max(values), "target": TARGETS[key]}
+    return out
+
+
+def _print_summary(summary: dict) -> None:
+    print("\nsummary (|error|: median / max, count within target; targets: volume 3 %, Chamfer 1 mm, COM 1.5 mm)")
+    for group, entry in summary.items():
+        if "objects" not in entry:
+            continue
+        parts = [f"{group}: {entry['objects']} objects" + (f", {entry['failed']} failed" if entry["failed"] else "")]
+        for key, unit in (("volume_error_pct", "%"), ("chamfer_mm", "mm"), ("com_shift_mm", "mm")):
+            if key in entry:
+                e = entry[key]
+                parts.append(f"{key.split('_')[0]} {e['median']:.2f} / {e['max']:.2f} {unit} "
+                             f"({e['within_target']}/{entry['objects']}; worst {e['worst']})")
+        print("  " + "; ".join(parts))
+    for key, unit in (("tsdf_ms_per_frame", "ms per 640x480 frame"), ("decompose_s", "s per object (CoACD defaults)")):
+        if key in summary:
+            e = summary[key]
+            print(f"  {key}: median {e['median']:.2f}, max {e['max']:.2f} {unit} (target {e['target']:g})")
