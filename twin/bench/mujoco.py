@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .paper import _spread, paper_objects
+from .paper import _spread, paper_cases
 
 SENSOR_POS, SENSOR_QUAT = "tracked_pos", "tracked_quat"
 WRENCH_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
@@ -318,45 +318,6 @@ def sysid_held(recording, X_tracked_body, prior, bounds, config: SysidConfig = S
         theta=theta, theta_half_widths=np.asarray(half_widths), iterations=iterations, chunk_count=len(initial),
         wall_s=time.perf_counter() - t0, log=log.getvalue(),
     )
-
-
-def paper_cases(seeds: int, duration_s: float, tmp: Path, names: tuple[str, ...] | None = None):
-    """The recordings `bench_paper` makes (same objects, motions and noise draws), read back from MCAP.
-
-    Yields (name, truth, placement, prior, bounds, seed, trial, heldout) per object and seed.
-    """
-    from assets import Inertial, Pose
-    from assets.materials import material_range
-    from pipelines.identify import InertialBounds
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
-    from pipelines.priors import uniform_density_prior
-    from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
-    from pipelines.synth.recording import write_recording
-
-    for k, (name, (mesh, mass)) in enumerate(paper_objects().items()):
-        if names is not None and name not in names:
-            continue
-        mesh = mesh.copy()
-        mesh.density = mass / mesh.volume
-        truth = Inertial(mass, (0.0, 0.0, 0.0), mesh.moment_inertia)
-        half_height = 0.5 * (mesh.bounds[1, 2] - mesh.bounds[0, 2])
-        placement = Pose((0.5, 0.0, half_height))
-        grasp = Pose((0.0, 0.0, half_height), (1.0, 0.0, 0.0, 0.0))
-        prior = uniform_density_prior(mesh.copy(), material_range(None))
-        bounds = InertialBounds(prior.lower, prior.upper)
-        motion_rng = np.random.default_rng(1000 + k)
-        config = HeldMotionConfig(duration_s=duration_s)
-        motions = {trial: simulate_held(truth, placement, grasp, config, motion_rng) for trial in ("trial", "heldout")}
-        for seed in range(seeds):
-            noise_rng = np.random.default_rng(seed)
-            recordings = {}
-            for trial, motion in motions.items():
-                t_pose, position, quat, t_wrench, force, torque = measure(motion, SensorNoise(), noise_rng)
-                path = tmp / f"{name}-{seed}-{trial}.mcap"
-                write_recording(path, pose=PoseTrack(t_pose, position, quat, "world", "gripper", "/tracker/pose"),
-                                wrench=WrenchTrack(t_wrench, force, torque, "/ft_sensor/wrench", "gripper"))
-                recordings[trial] = read_recording(path)
-            yield name, truth, placement, prior, bounds, seed, recordings["trial"], recordings["heldout"]
 
 
 def bench_mujoco(seeds: int = 5, duration_s: float = 10.0, sysid_configs: dict | None = None) -> list[dict]:

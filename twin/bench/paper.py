@@ -29,60 +29,74 @@ def paper_objects() -> dict:
     }
 
 
+def paper_cases(seeds: int, duration_s: float, tmp: Path, names: tuple[str, ...] | None = None):
+    """The recordings `bench_paper` makes (same objects, motions and noise draws), read back from MCAP.
+
+    Yields (name, truth, placement, prior, bounds, seed, trial, heldout) per object and seed.
+    """
+    from assets import Inertial, Pose
+    from assets.materials import material_range
+    from pipelines.identify import InertialBounds
+    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from pipelines.priors import uniform_density_prior
+    from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
+    from pipelines.synth.recording import write_recording
+
+    for k, (name, (mesh, mass)) in enumerate(paper_objects().items()):
+        if names is not None and name not in names:
+            continue
+        mesh = mesh.copy()
+        mesh.density = mass / mesh.volume
+        truth = Inertial(mass, (0.0, 0.0, 0.0), mesh.moment_inertia)
+        half_height = 0.5 * (mesh.bounds[1, 2] - mesh.bounds[0, 2])
+        placement = Pose((0.5, 0.0, half_height))
+        grasp = Pose((0.0, 0.0, half_height), (1.0, 0.0, 0.0, 0.0))
+        prior = uniform_density_prior(mesh.copy(), material_range(None))
+        bounds = InertialBounds(prior.lower, prior.upper)
+        motion_rng = np.random.default_rng(1000 + k)
+        config = HeldMotionConfig(duration_s=duration_s)
+        motions = {trial: simulate_held(truth, placement, grasp, config, motion_rng) for trial in ("trial", "heldout")}
+        for seed in range(seeds):
+            noise_rng = np.random.default_rng(seed)
+            recordings = {}
+            for trial, motion in motions.items():
+                t_pose, position, quat, t_wrench, force, torque = measure(motion, SensorNoise(), noise_rng)
+                path = tmp / f"{name}-{seed}-{trial}.mcap"
+                write_recording(path, pose=PoseTrack(t_pose, position, quat, "world", "gripper", "/tracker/pose"),
+                                wrench=WrenchTrack(t_wrench, force, torque, "/ft_sensor/wrench", "gripper"))
+                recordings[trial] = read_recording(path)
+            yield name, truth, placement, prior, bounds, seed, recordings["trial"], recordings["heldout"]
+
+
 def bench_paper(seeds: int = 5, duration_s: float = 10.0, paper_optimizer: bool = False) -> list[dict]:
     """Each paper object held and moved for `duration_s`, recorded with `seeds` noise draws at the ATI
     sensor's resolution; identified through the MCAP files like a build; errors and spread per estimator.
 
     With `paper_optimizer`, RigPI's own scheme (plain pose loss, 1/100-scale gradient steps) also
     runs on the same windows, started from the prior."""
-    from assets import Inertial, Pose
-    from assets.materials import material_range
-    from pipelines.identify import IdentifyConfig, InertialBounds, identify_free_body, identify_held, tracked_to_object
+    from pipelines.identify import IdentifyConfig, identify_free_body, identify_held, tracked_to_object
     from pipelines.identify.held import windows_from_recordings
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
-    from pipelines.priors import uniform_density_prior
-    from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
-    from pipelines.synth.recording import write_recording
 
-    rows = []
+    estimates: dict = {}
+    truths: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        for k, (name, (mesh, mass)) in enumerate(paper_objects().items()):
-            mesh = mesh.copy()
-            mesh.density = mass / mesh.volume
-            truth = Inertial(mass, (0.0, 0.0, 0.0), mesh.moment_inertia)
-            half_height = 0.5 * (mesh.bounds[1, 2] - mesh.bounds[0, 2])
-            placement = Pose((0.5, 0.0, half_height))
-            grasp = Pose((0.0, 0.0, half_height), (1.0, 0.0, 0.0, 0.0))
-            prior = uniform_density_prior(mesh.copy(), material_range(None))
-            bounds = InertialBounds(prior.lower, prior.upper)
-            motion_rng = np.random.default_rng(1000 + k)
-            config = HeldMotionConfig(duration_s=duration_s)
-            motions = {trial: simulate_held(truth, placement, grasp, config, motion_rng) for trial in ("trial", "heldout")}
-            estimates = {"least_squares": [], "newton": [], "kept": []}
+        for name, truth, placement, prior, bounds, _, trial, heldout in paper_cases(seeds, duration_s, Path(tmp)):
+            truths[name] = truth
+            X = tracked_to_object(trial, placement)
+            held = identify_held([trial], heldout, X, prior.inertial, bounds, IdentifyConfig())
+            found = {
+                "least_squares": (held.least_squares.inertial, held.least_squares.covariance),
+                "newton": (held.newton.inertial, held.newton.covariance),
+                "kept": (held.inertial, held.covariance),
+            }
             if paper_optimizer:
-                estimates["rigpi_scheme"] = []
-            for seed in range(seeds):
-                noise_rng = np.random.default_rng(seed)
-                recordings = {}
-                for trial, motion in motions.items():
-                    t_pose, position, quat, t_wrench, force, torque = measure(motion, SensorNoise(), noise_rng)
-                    path = tmp / f"{name}-{seed}-{trial}.mcap"
-                    write_recording(path, pose=PoseTrack(t_pose, position, quat, "world", "gripper", "/tracker/pose"),
-                                    wrench=WrenchTrack(t_wrench, force, torque, "/ft_sensor/wrench", "gripper"))
-                    recordings[trial] = read_recording(path)
-                X = tracked_to_object(recordings["trial"], placement)
-                held = identify_held([recordings["trial"]], recordings["heldout"], X, prior.inertial, bounds,
-                                     IdentifyConfig())
-                estimates["least_squares"].append((held.least_squares.inertial, held.least_squares.covariance))
-                estimates["newton"].append((held.newton.inertial, held.newton.covariance))
-                estimates["kept"].append((held.inertial, held.covariance))
-                if paper_optimizer:
-                    rigpi = identify_free_body(windows_from_recordings([recordings["trial"]], IdentifyConfig()), X, prior.inertial,
-                                               bounds, IdentifyConfig(optimizer="paper"))
-                    estimates["rigpi_scheme"].append((rigpi.inertial, rigpi.covariance))
-            for estimator, values in estimates.items():
-                rows.append({"object": name, "estimator": estimator, **_spread(values, truth)})
+                rigpi = identify_free_body(windows_from_recordings([trial], IdentifyConfig()), X, prior.inertial,
+                                           bounds, IdentifyConfig(optimizer="paper"))
+                found["rigpi_scheme"] = (rigpi.inertial, rigpi.covariance)
+            for estimator, value in found.items():
+                estimates.setdefault((name, estimator), []).append(value)
+    rows = [{"object": name, "estimator": estimator, **_spread(values, truths[name])}
+            for (name, estimator), values in estimates.items()]
     _print_paper_table(rows)
     return rows
 
