@@ -66,9 +66,10 @@ class Bench:
     throughput: time per identification iteration for 1 and many objects batched, on --device.
     crlb: spread of the estimates over --draws noise draws against the Cramer-Rao bound.
     mujoco: paper's recordings identified by mujoco.sysid (pseudo-inertia) and by ours, side by side.
+    reconstruct: scans of real meshes and primitives (3-30 cm, two noise levels) against their truth; real Kinect frames.
     """
 
-    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco"]]
+    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -82,6 +83,8 @@ class Bench:
     """Warp device for throughput, e.g. cuda:0."""
     objects: tuple[int, ...] = (1, 1024)
     """Objects batched per run (throughput)."""
+    quick: bool = False
+    """A subset that runs in about a minute (reconstruct)."""
 
 
 def _log(message: str) -> None:
@@ -146,6 +149,10 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.mujoco import bench_mujoco
 
                 bench_mujoco(command.seeds)
+            elif command.what == "reconstruct":
+                from twin.bench.reconstruct import bench_reconstruct
+
+                bench_reconstruct(quick=command.quick)
             elif command.what == "priors":
                 from twin.bench.priors import bench_priors
 

@@ -43,9 +43,9 @@ def test_rest_puts_a_box_flat_on_the_table():
 def test_summary_splits_by_size_and_counts_targets():
     """Objects under 5 cm are summarised apart; the worst object and the count within target are given."""
     rows = [
-        {"object": "a", "size_m": 0.10, "noise": "low", "volume_error_pct": 1.0, "chamfer_mm": 0.2, "com_shift_mm": 0.1,
+        {"object": "a", "family": "primitive", "size_m": 0.10, "noise": "low", "volume_error_pct": 1.0, "chamfer_mm": 0.2, "com_shift_mm": 0.1,
          "tsdf_ms_per_frame": 20.0, "decompose_s": 5.0},
-        {"object": "b", "size_m": 0.30, "noise": "low", "volume_error_pct": -5.0, "chamfer_mm": 0.5, "com_shift_mm": 2.0,
+        {"object": "b", "family": "workshop-tools", "size_m": 0.30, "noise": "low", "volume_error_pct": -5.0, "chamfer_mm": 0.5, "com_shift_mm": 2.0,
          "tsdf_ms_per_frame": 30.0},
         {"object": "c", "size_m": 0.03, "noise": "low", "volume_error_pct": 9.0, "chamfer_mm": 0.1, "com_shift_mm": 0.1,
          "tsdf_ms_per_frame": 25.0},
@@ -56,3 +56,5 @@ def test_summary_splits_by_size_and_counts_targets():
     assert large["volume_error_pct"]["within_target"] == 1 and large["com_shift_mm"]["max"] == 2.0
     assert summary["size < 5 cm, low noise"]["volume_error_pct"]["max"] == 9.0
     assert summary["tsdf_ms_per_frame"]["max"] == 30.0 and summary["decompose_s"]["median"] == 5.0
+    assert summary["size >= 5 cm, workshop tools, low noise"]["objects"] == 1
+    assert summary["size >= 5 cm, primitives and MIT push shapes, low noise"]["volume_error_pct"]["max"] == 1.0
