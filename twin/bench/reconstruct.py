@@ -60,20 +60,19 @@ class _Case:
     reference: bool = False  # also a noise-free scan
 
 
-def bench_reconstruct(
-    quick: bool = False, out_dir: Path = Path("out/bench/reconstruct"), data_root: Path = DATA_ROOT
-) -> dict:
+def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_root: Path = DATA_ROOT) -> dict:
     """Run the synthetic and the real benchmarks; print tables; write results.json and pictures to `out_dir`.
 
     Args:
         quick: a subset (5 objects, 30 Kinect frames for the pose-free path) that runs in about a minute.
-        out_dir: where results.json and the pictures go (printed).
+        out_dir: where results.json and the pictures go (printed); default out/bench/reconstruct
+            (reconstruct-quick for the subset).
         data_root: the shared data folder (workshop-tools/, mit-push/, rgbd/).
 
     Returns:
         The results, as written to results.json.
     """
-    out_dir = Path(out_dir)
+    out_dir = Path(out_dir or f"out/bench/reconstruct{'-quick' if quick else ''}")
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     cases = _cases(data_root, quick)
