@@ -185,6 +185,7 @@ def _rest(mesh):
     transforms, probabilities = trimesh.poses.compute_stable_poses(mesh)
     mesh = mesh.copy()
     mesh.apply_transform(transforms[int(np.argmax(probabilities))])
+    mesh.metadata["size_m"] = float(mesh.extents.max())  # its length, before the turn widens its box
     mesh.apply_transform(trimesh.transformations.rotation_matrix(np.deg2rad(20.0), (0, 0, 1)))
     return _place(mesh)
 
@@ -219,10 +220,11 @@ def _run_case(case: _Case, truth, noise: str, tmp: Path, decompose: bool) -> dic
     from pipelines.scan import read_scan
     from pipelines.synth.render import render_scan
 
-    size = float(truth.extents.max())
+    size = float(truth.metadata.get("size_m", truth.extents.max()))
     root = tmp / f"{case.name.replace(' ', '_')}-{noise}"
     t0 = time.perf_counter()
-    render_scan(truth, root, _render_config(size, noise), np.random.default_rng(0), case.name)
+    framing = float(truth.extents.max())  # what the cameras must keep in view
+    render_scan(truth, root, _render_config(framing, noise), np.random.default_rng(0), case.name)
     render_s = time.perf_counter() - t0
     row = {"object": case.name, "family": case.family, "size_m": size, "noise": noise, "render_s": render_s}
     try:
