@@ -357,18 +357,28 @@ def _pose_opencv(i: int, f: dict, transforms_path: Path) -> np.ndarray:
         raise ScanError(f"{where}: transform_matrix must be 4x4, got shape {T.shape}")
     if not np.all(np.isfinite(T)):
         raise ScanError(f"{where}: transform_matrix has non-finite entries")
+    return _rigid(T, f"{where}: transform_matrix") @ OPENCV_FROM_OPENGL
+
+
+def _rigid(T: np.ndarray, what: str) -> np.ndarray:
+    """T with its rotation re-orthonormalised, or ScanError if it is not a rigid transform.
+
+    Exporters leave float noise and KinectFusion's poses drift off SO(3) by ~4e-4;
+    anything further off is a wrong matrix, not noise.
+    """
     if np.abs(T[3] - [0.0, 0.0, 0.0, 1.0]).max() > 1e-6:
-        raise ScanError(f"{where}: transform_matrix's last row must be [0, 0, 0, 1], got {T[3].tolist()}")
+        raise ScanError(f"{what}: the last row must be [0, 0, 0, 1], got {T[3].tolist()}")
     R = T[:3, :3]
     err = np.abs(R.T @ R - np.eye(3)).max()
     if err > _ROTATION_TOLERANCE or np.linalg.det(R) <= 0:
         raise ScanError(
-            f"{where}: transform_matrix is not rigid (|R^T R - I| = {err:.3g}, det R = {np.linalg.det(R):.4g}); "
+            f"{what} is not rigid (|R^T R - I| = {err:.3g}, det R = {np.linalg.det(R):.4g}); "
             "expected a rotation and a translation in metres"
         )
-    U, _, Vt = np.linalg.svd(R)  # remove the float noise exporters leave
+    U, _, Vt = np.linalg.svd(R)
+    T = T.copy()
     T[:3, :3] = U @ Vt
-    return T @ OPENCV_FROM_OPENGL
+    return T
 
 
 def _file(root: Path, rel, transforms_path: Path, what: str, i: int) -> Path:
@@ -545,18 +555,7 @@ def _seven_scenes_intrinsics(path: Path, width: int, height: int, size_from: Pat
 
 
 def _seven_scenes_pose(path: Path) -> np.ndarray:
-    T = _read_matrix(path, (4, 4), "the camera-to-world pose")
-    if np.abs(T[3] - [0.0, 0.0, 0.0, 1.0]).max() > 1e-6:
-        raise ScanError(f"{path}: the pose's last row must be [0, 0, 0, 1], got {T[3].tolist()}")
-    R = T[:3, :3]
-    err = np.abs(R.T @ R - np.eye(3)).max()
-    if err > _ROTATION_TOLERANCE or np.linalg.det(R) <= 0:
-        raise ScanError(
-            f"{path}: the pose is not rigid (|R^T R - I| = {err:.3g}, det R = {np.linalg.det(R):.4g}); "
-            "expected a camera-to-world rotation and a translation in metres"
-        )
-    U, _, Vt = np.linalg.svd(R)  # KinectFusion's poses drift off SO(3) by ~4e-4
-    T[:3, :3] = U @ Vt
+    T = _rigid(_read_matrix(path, (4, 4), "the camera-to-world pose"), f"{path}: the pose")
     T.setflags(write=False)
     return T
 
