@@ -24,7 +24,6 @@ from .inertia import THETA_SIZE, flat_physical, physical_from_theta, physical_ja
 from .rollout import FreeBodyRollout
 from .windows import ShootingWindows
 
-PHYSICAL_NAMES = ("mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
 # scales of the start-state corrections: position [m], rotation [rad], velocity [m/s], angular velocity [rad/s]
 CORRECTION_SCALE = np.array([1e-3] * 3 + [1e-2] * 3)
 CORRECTION_RATE_SCALE = np.array([1e-2] * 3 + [1e-1] * 3)
