@@ -8,14 +8,14 @@ kept; without one the Newton fit is kept (`method="newton"`).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Callable, Literal
 
 import numpy as np
 
 from assets import FitMetrics, Inertial, Pose
 
-from .free_body import Identification, IdentifyConfig, InertialBounds, identify_free_body
+from .free_body import Identification, IdentifyConfig, InertialBounds, identify_free_body, prior_starts
 from .inertia import theta_from_physical
 from .least_squares import LeastSquaresResult, identify_least_squares
 from .rollout import FreeBodyRollout
@@ -97,8 +97,10 @@ def identify_held(
     candidates = {"baseline": prior, "least_squares": ls.inertial}
     newton = None
     if method == "newton":
-        start = _clip_into_bounds(ls.inertial, prior, bounds)
-        newton = identify_free_body(windows_from_recordings(trials, config), X_tracked_body, start, bounds, config, progress)
+        starts = [_clip_into_bounds(ls.inertial, prior, bounds)] + prior_starts(prior, bounds, config.starts - 1,
+                                                                                 config.seed)
+        newton = identify_free_body(windows_from_recordings(trials, config), X_tracked_body, starts, bounds, config,
+                                    progress)
         candidates["newton"] = newton.inertial
 
     fits, impulse, traces = _replay(holdout or trials[0], X_tracked_body, candidates, config)
@@ -118,11 +120,12 @@ def identify_held(
 
 
 def windows_from_recordings(recordings, config: IdentifyConfig) -> ShootingWindows:
-    """Back-to-back shooting windows of every recording, batched."""
+    """Back-to-back shooting windows of every recording, batched, smoothed as `config` says."""
     return concat_windows(
         [
             make_windows(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s, r.wrench.force,
-                         r.wrench.torque, window_s=config.window_s, substeps=config.substeps)
+                         r.wrench.torque, window_s=config.window_s, substeps=config.substeps,
+                         smoothing_hz=config.smoothing_hz)
             for r in recordings
         ]
     )
@@ -140,23 +143,25 @@ def _clip_into_bounds(inertial: Inertial, prior: Inertial, bounds: InertialBound
 
 
 def _replay(recording, X_tracked_body: Pose, candidates: dict, config: IdentifyConfig):
-    """Windowed replay from measured states for each candidate body.
+    """Windowed replay from measured (unsmoothed) states for each candidate body, side by side.
 
     Returns FitMetrics per candidate, its momentum-scaled RMS (position, rotation), and position traces.
     """
-    windows = windows_from_recordings([recording], config)
-    rollout = FreeBodyRollout(windows, X_tracked_body, device=config.device)
+    windows = windows_from_recordings([recording], replace(config, smoothing_hz=None))
+    rollout = FreeBodyRollout(windows, X_tracked_body, sets=len(candidates), device=config.device)
     t = windows.t_start_s[None, :] + windows.dt_s * windows.substeps * np.arange(1, windows.sample_count + 1)[:, None]
     measured = windows.measured_position[1:]
     traces = {"t_s": t.T.reshape(-1).tolist(), "measured_position": measured.transpose(1, 0, 2).reshape(-1, 3).tolist(),
               "window_s": windows.window_s}
     fits, impulse = {}, {}
-    for label, inertial in candidates.items():
-        theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())
-        scaled = rollout.residuals(theta, momentum_scaled=True)
+    thetas = np.stack([theta_from_physical(c.mass, c.com, c.inertia_matrix()) for c in candidates.values()])
+    all_scaled = rollout.residuals(thetas, momentum_scaled=True)
+    all_plain = rollout.residuals(thetas, momentum_scaled=False)
+    for k, label in enumerate(candidates):
+        scaled = all_scaled[:, k]
         impulse[label] = [float(np.sqrt(np.mean(np.sum(scaled[..., :3] ** 2, -1)))),
                           float(np.sqrt(np.mean(np.sum(scaled[..., 3:] ** 2, -1))))]
-        r = rollout.residuals(theta, momentum_scaled=False)
+        r = all_plain[:, k]
         rp, rr = r[..., :3], r[..., 3:]
         fits[label] = FitMetrics(
             rmse_position_m=float(np.sqrt(np.mean(np.sum(rp**2, -1)))),

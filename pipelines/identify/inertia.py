@@ -65,11 +65,14 @@ def flat_physical(theta: np.ndarray) -> np.ndarray:
 
 
 @wp.func
-def inertial_from_theta(theta: wp.array[float]):
-    """Warp twin of `physical_from_theta`: returns mass [kg], COM [m], inertia [kg m^2]."""
-    m = wp.exp(2.0 * theta[0])
-    U = wp.mat33(wp.exp(theta[1]), theta[4], theta[6], 0.0, wp.exp(theta[2]), theta[5], 0.0, 0.0, wp.exp(theta[3]))
+def inertial_from_theta(theta: wp.array2d[float], k: int):
+    """Warp twin of `physical_from_theta` for row k: returns mass [kg], COM [m], inertia [kg m^2]."""
+    m = wp.exp(2.0 * theta[k, 0])
+    U = wp.mat33(
+        wp.exp(theta[k, 1]), theta[k, 4], theta[k, 6], 0.0, wp.exp(theta[k, 2]), theta[k, 5], 0.0, 0.0,
+        wp.exp(theta[k, 3]),
+    )
     S = U * wp.transpose(U)
     tr = S[0, 0] + S[1, 1] + S[2, 2]
     inertia = m * (tr * wp.identity(n=3, dtype=float) - S)
-    return m, wp.vec3(theta[7], theta[8], theta[9]), inertia
+    return m, wp.vec3(theta[k, 7], theta[k, 8], theta[k, 9]), inertia

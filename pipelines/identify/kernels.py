@@ -1,8 +1,10 @@
 """Warp kernels of free-body identification, each beside the launcher that runs it.
 
-One Newton world per shooting window; every world shares the ten inertial
-parameters theta and has its own initial-state correction. All kernels run on
-the tape so gradients reach theta and the corrections.
+One Newton world per (parameter set, shooting window), set-major: body
+b = k * W + w. The windows of set k share its ten inertial parameters theta[k];
+each world has its own initial-state correction. Sets batch multi-start and
+finite-difference Jacobians into one rollout. All kernels run on the tape so
+gradients reach theta and the corrections.
 """
 
 from __future__ import annotations
@@ -14,19 +16,20 @@ from .inertia import inertial_from_theta
 
 @wp.kernel
 def assign_inertial_params(
-    theta: wp.array[float],
+    theta: wp.array2d[float],
+    windows_per_set: int,
     body_mass: wp.array[float],
     body_inv_mass: wp.array[float],
     body_com: wp.array[wp.vec3],
     body_inertia: wp.array[wp.mat33],
     body_inv_inertia: wp.array[wp.mat33],
 ):
-    """Write mass [kg], COM [m, body frame] and inertia [kg m^2] from theta into every world's body.
+    """Write mass [kg], COM [m, body frame] and inertia [kg m^2] from its set's theta into each world's body.
 
     SemiImplicit integrates with the inverses, so those must carry the gradient.
     """
     b = wp.tid()
-    m, com, inertia = inertial_from_theta(theta)
+    m, com, inertia = inertial_from_theta(theta, b // windows_per_set)
     body_mass[b] = m
     body_inv_mass[b] = 1.0 / m
     body_com[b] = com
@@ -34,11 +37,11 @@ def assign_inertial_params(
     body_inv_inertia[b] = wp.inverse(inertia)
 
 
-def assign_inertial_params_to_model(theta: wp.array, model) -> None:
+def assign_inertial_params_to_model(theta: wp.array2d, windows_per_set: int, model) -> None:
     wp.launch(
         assign_inertial_params,
         dim=model.body_count,
-        inputs=[theta],
+        inputs=[theta, windows_per_set],
         outputs=[model.body_mass, model.body_inv_mass, model.body_com, model.body_inertia, model.body_inv_inertia],
         device=model.device,
     )
@@ -51,6 +54,7 @@ def set_window_start_state(
     correction: wp.array[wp.spatial_vector],
     correction_rate: wp.array[wp.spatial_vector],
     X_tracked_body: wp.transform,
+    windows_per_set: int,
     body_com: wp.array[wp.vec3],
     body_q: wp.array[wp.transform],
     body_qd: wp.array[wp.spatial_vector],
@@ -62,19 +66,20 @@ def set_window_start_state(
     (velocity [m/s], angular velocity [rad/s]). Newton's body_qd holds the COM's
     velocity, which depends on the COM being estimated.
     """
-    w = wp.tid()
+    b = wp.tid()
+    w = b % windows_per_set
     X = tracked_pose[w]
-    dx = wp.spatial_top(correction[w])
-    dr = wp.spatial_bottom(correction[w])
+    dx = wp.spatial_top(correction[b])
+    dr = wp.spatial_bottom(correction[b])
     # first-order exponential map: smooth at zero, where the gradient must not vanish
     dq = wp.normalize(wp.quat(0.5 * dr[0], 0.5 * dr[1], 0.5 * dr[2], 1.0))
     X = wp.transform(wp.transform_get_translation(X) + dx, dq * wp.transform_get_rotation(X))
     Xb = X * X_tracked_body
-    body_q[w] = Xb
-    v = wp.spatial_top(tracked_twist[w]) + wp.spatial_top(correction_rate[w])
-    omega = wp.spatial_bottom(tracked_twist[w]) + wp.spatial_bottom(correction_rate[w])
-    r = wp.transform_point(Xb, body_com[w]) - wp.transform_get_translation(X)
-    body_qd[w] = wp.spatial_vector(v + wp.cross(omega, r), omega)
+    body_q[b] = Xb
+    v = wp.spatial_top(tracked_twist[w]) + wp.spatial_top(correction_rate[b])
+    omega = wp.spatial_bottom(tracked_twist[w]) + wp.spatial_bottom(correction_rate[b])
+    r = wp.transform_point(Xb, body_com[b]) - wp.transform_get_translation(X)
+    body_qd[b] = wp.spatial_vector(v + wp.cross(omega, r), omega)
 
 
 @wp.kernel
@@ -84,6 +89,7 @@ def apply_measured_wrench(
     X_body_tracked: wp.transform,
     wrench: wp.array2d[wp.spatial_vector],
     step: int,
+    windows_per_set: int,
     body_f: wp.array[wp.spatial_vector],
 ):
     """Apply the measured wrench (force [N], torque [N m] about the tracked origin, world axes).
@@ -91,12 +97,12 @@ def apply_measured_wrench(
     Newton wants torque about the COM; the moment arm uses the current COM
     estimate so the gradient reaches it.
     """
-    w = wp.tid()
-    X = body_q[w]
-    f = wp.spatial_top(wrench[step, w])
-    tau = wp.spatial_bottom(wrench[step, w])
-    arm = wp.transform_point(X, wp.transform_get_translation(X_body_tracked)) - wp.transform_point(X, body_com[w])
-    body_f[w] = wp.spatial_vector(f, tau + wp.cross(arm, f))
+    b = wp.tid()
+    X = body_q[b]
+    f = wp.spatial_top(wrench[step, b % windows_per_set])
+    tau = wp.spatial_bottom(wrench[step, b % windows_per_set])
+    arm = wp.transform_point(X, wp.transform_get_translation(X_body_tracked)) - wp.transform_point(X, body_com[b])
+    body_f[b] = wp.spatial_vector(f, tau + wp.cross(arm, f))
 
 
 @wp.kernel
@@ -108,9 +114,10 @@ def eval_tracked_pose_error(
     measured: wp.array2d[wp.transform],
     sample: int,
     momentum_scaled: int,
+    windows_per_set: int,
     residual: wp.array3d[float],
 ):
-    """Tracked-frame error per window: position [m], then rotation vector [rad], world axes.
+    """Tracked-frame error per world: position [m], then rotation vector [rad], world axes.
 
     With momentum_scaled = 1 the position error is multiplied by the mass [kg m]
     and the rotation error by the world-frame inertia [kg m^2 rad]. The measured
@@ -121,21 +128,21 @@ def eval_tracked_pose_error(
     compares measured and predicted impulses, where the noise sits on the side
     that does not bias a least-squares fit.
     """
-    w = wp.tid()
-    X = body_q[w] * X_body_tracked
-    Xm = measured[sample, w]
+    b = wp.tid()
+    X = body_q[b] * X_body_tracked
+    Xm = measured[sample, b % windows_per_set]
     dp = wp.transform_get_translation(X) - wp.transform_get_translation(Xm)
     dq = wp.transform_get_rotation(X) * wp.quat_inverse(wp.transform_get_rotation(Xm))
     # 2 vec(dq) is the rotation vector for small angles; the sign picks the short way round
     s = wp.where(dq[3] < 0.0, -2.0, 2.0)
     dr = wp.vec3(dq[0], dq[1], dq[2]) * s
     if momentum_scaled != 0:
-        R = wp.quat_to_matrix(wp.transform_get_rotation(body_q[w]))
-        dp = body_mass[w] * dp
-        dr = R * body_inertia[w] * wp.transpose(R) * dr
+        R = wp.quat_to_matrix(wp.transform_get_rotation(body_q[b]))
+        dp = body_mass[b] * dp
+        dr = R * body_inertia[b] * wp.transpose(R) * dr
     for k in range(3):
-        residual[sample, w, k] = dp[k]
-        residual[sample, w, 3 + k] = dr[k]
+        residual[sample, b, k] = dp[k]
+        residual[sample, b, 3 + k] = dr[k]
 
 
 @wp.kernel

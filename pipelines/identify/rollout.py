@@ -20,26 +20,35 @@ GRAVITY_M_S2 = (0.0, 0.0, -9.81)
 
 
 class FreeBodyRollout:
-    """One free body per window, SemiImplicit, no damping; parameters written on the tape.
+    """One free body per (parameter set, window), SemiImplicit, no damping; parameters written on the tape.
 
-    X_tracked_body: the object (body) frame in the tracked frame.
+    X_tracked_body: the object (body) frame in the tracked frame. `sets` parameter sets run
+    side by side, each over all windows (set-major worlds): multi-start and finite-difference
+    Jacobians cost one rollout. Arguments take theta [sets, 10] and corrections [sets, W, 6].
+    Without `requires_grad` it only runs forward (no tape), at half the memory.
     """
 
-    def __init__(self, windows: ShootingWindows, X_tracked_body: Pose, device: str = "cpu"):
+    def __init__(
+        self, windows: ShootingWindows, X_tracked_body: Pose, sets: int = 1, device: str = "cpu",
+        requires_grad: bool = True,
+    ):
         import newton
         import warp as wp
 
         self.windows = windows
+        self.sets = sets
         self.device = device
         W = windows.window_count
         sub = newton.ModelBuilder(gravity=GRAVITY_M_S2)
         sub.add_body(mass=1.0, inertia=wp.mat33(np.eye(3) * 1e-3), lock_inertia=True)
         builder = newton.ModelBuilder(gravity=GRAVITY_M_S2)
-        builder.replicate(sub, W)
-        self.model = builder.finalize(device=device, requires_grad=True)
+        builder.replicate(sub, sets * W)
+        self.model = builder.finalize(device=device, requires_grad=requires_grad)
         self.solver = newton.solvers.SolverSemiImplicit(self.model, angular_damping=0.0)
         self.control = self.model.control()
-        self.states = [self.model.state(requires_grad=True) for _ in range(windows.step_count + 1)]
+        # the tape needs every step's state; a forward-only rollout alternates two
+        count = windows.step_count + 1 if requires_grad else 2
+        self.states = [self.model.state(requires_grad=requires_grad) for _ in range(count)]
 
         X_tb = wp.transform(wp.vec3(*X_tracked_body.position), wp.quat(*X_tracked_body.quaternion_xyzw))
         self.X_tracked_body = X_tb
@@ -53,10 +62,12 @@ class FreeBodyRollout:
         self.start_twist = wp.array(windows.start_twist.astype(np.float32), dtype=wp.spatial_vector, device=device)
         self.wrench = wp.array(windows.wrench.astype(np.float32), dtype=wp.spatial_vector, device=device)
 
-        self.theta = wp.zeros(THETA_SIZE, dtype=float, device=device, requires_grad=True)
-        self.correction = wp.zeros(W, dtype=wp.spatial_vector, device=device, requires_grad=True)
-        self.correction_rate = wp.zeros(W, dtype=wp.spatial_vector, device=device, requires_grad=True)
-        self.residual = wp.zeros((windows.sample_count + 1, W, 6), dtype=float, device=device, requires_grad=True)
+        self.theta = wp.zeros((sets, THETA_SIZE), dtype=float, device=device, requires_grad=requires_grad)
+        self.correction = wp.zeros(sets * W, dtype=wp.spatial_vector, device=device, requires_grad=requires_grad)
+        self.correction_rate = wp.zeros(sets * W, dtype=wp.spatial_vector, device=device,
+                                        requires_grad=requires_grad)
+        self.residual = wp.zeros((windows.sample_count + 1, sets * W, 6), dtype=float, device=device,
+                                 requires_grad=requires_grad)
         self.weight = wp.zeros((windows.sample_count + 1, 6), dtype=float, device=device)
         self.loss = wp.zeros(1, dtype=float, device=device, requires_grad=True)
         self._graphs: dict = {}
@@ -64,35 +75,34 @@ class FreeBodyRollout:
         self._loaded: set = set()
 
     def _load(self, theta: np.ndarray, correction: np.ndarray | None, correction_rate: np.ndarray | None):
-        W = self.windows.window_count
-        self.theta.assign(np.asarray(theta, dtype=np.float32))
-        self.correction.assign(np.zeros((W, 6), np.float32) if correction is None else correction.astype(np.float32))
-        self.correction_rate.assign(
-            np.zeros((W, 6), np.float32) if correction_rate is None else correction_rate.astype(np.float32)
-        )
+        shape = (self.sets * self.windows.window_count, 6)
+        self.theta.assign(np.asarray(theta, dtype=np.float32).reshape(self.sets, THETA_SIZE))
+        for array, value in ((self.correction, correction), (self.correction_rate, correction_rate)):
+            array.assign(np.zeros(shape, np.float32) if value is None else np.asarray(value, np.float32).reshape(shape))
 
     def _forward(self, momentum_scaled: bool) -> None:
         import warp as wp
 
         w = self.windows
+        W = w.window_count
         model = self.model
-        assign_inertial_params_to_model(self.theta, model)
+        assign_inertial_params_to_model(self.theta, W, model)
         s0 = self.states[0]
         wp.launch(
             set_window_start_state,
-            dim=w.window_count,
-            inputs=[self.start_pose, self.start_twist, self.correction, self.correction_rate, self.X_tracked_body,
+            dim=model.body_count,
+            inputs=[self.start_pose, self.start_twist, self.correction, self.correction_rate, self.X_tracked_body, W,
                     model.body_com],
             outputs=[s0.body_q, s0.body_qd],
             device=self.device,
         )
         self.residual.zero_()
         for step in range(w.step_count):
-            s, s_next = self.states[step], self.states[step + 1]
+            s, s_next = self.states[step % len(self.states)], self.states[(step + 1) % len(self.states)]
             wp.launch(
                 apply_measured_wrench,
-                dim=w.window_count,
-                inputs=[s.body_q, model.body_com, self.X_body_tracked, self.wrench, step],
+                dim=model.body_count,
+                inputs=[s.body_q, model.body_com, self.X_body_tracked, self.wrench, step, W],
                 outputs=[s.body_f],
                 device=self.device,
             )
@@ -101,9 +111,9 @@ class FreeBodyRollout:
                 sample = (step + 1) // w.substeps
                 wp.launch(
                     eval_tracked_pose_error,
-                    dim=w.window_count,
+                    dim=model.body_count,
                     inputs=[s_next.body_q, model.body_mass, model.body_inertia, self.X_body_tracked, self.measured,
-                            sample, int(momentum_scaled)],
+                            sample, int(momentum_scaled), W],
                     outputs=[self.residual],
                     device=self.device,
                 )
@@ -128,15 +138,18 @@ class FreeBodyRollout:
         wp.capture_launch(self._graphs[key])
 
     def residuals(self, theta, correction=None, correction_rate=None, momentum_scaled=True) -> np.ndarray:
-        """Tracked-frame errors [S, W, 6] for samples 1..S: see `eval_tracked_pose_error`."""
+        """Tracked-frame errors [S, sets, W, 6] for samples 1..S: see `eval_tracked_pose_error`."""
         self._load(theta, correction, correction_rate)
         self._run(("forward", momentum_scaled), lambda: self._forward(momentum_scaled))
-        return self.residual.numpy()[1:].astype(float)
+        S, W = self.windows.sample_count, self.windows.window_count
+        return self.residual.numpy()[1:].astype(float).reshape(S, self.sets, W, 6)
 
     def loss_and_grad(
         self, theta, correction, correction_rate, weight: np.ndarray, momentum_scaled: bool
-    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
-        """Weighted sum of squared pose errors and its gradients w.r.t. theta and the corrections.
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Weighted sum of squared pose errors per set [sets] and its gradients w.r.t. theta [sets, 10]
+        and the corrections [sets, W, 6]. A set's loss depends on its own parameters only, so one
+        backward pass of the total gives every set's gradient.
 
         weight [S, 6]: per sample index within the window and channel.
         """
@@ -159,11 +172,13 @@ class FreeBodyRollout:
             tape.backward(self.loss)
 
         self._run(("gradient", momentum_scaled), record)
+        K, S, W = self.sets, self.windows.sample_count, self.windows.window_count
+        r = self.residual.numpy()[1:].astype(float).reshape(S, K, W, 6)
         out = (
-            float(self.loss.numpy()[0]),
+            np.einsum("skwc,sc->k", r * r, weight),
             self.theta.grad.numpy().astype(float).copy(),
-            self.correction.grad.numpy().astype(float).copy(),
-            self.correction_rate.grad.numpy().astype(float).copy(),
+            self.correction.grad.numpy().astype(float).reshape(K, W, 6).copy(),
+            self.correction_rate.grad.numpy().astype(float).reshape(K, W, 6).copy(),
         )
         self._tapes[momentum_scaled].zero()
         return out

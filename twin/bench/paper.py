@@ -90,8 +90,8 @@ def bench_paper(seeds: int = 5, duration_s: float = 10.0, paper_optimizer: bool 
                 "kept": (held.inertial, held.covariance),
             }
             if paper_optimizer:
-                rigpi = identify_free_body(windows_from_recordings([trial], IdentifyConfig()), X, prior.inertial,
-                                           bounds, IdentifyConfig(optimizer="paper"))
+                paper = IdentifyConfig(optimizer="paper", smoothing_hz=None)
+                rigpi = identify_free_body(windows_from_recordings([trial], paper), X, [prior.inertial], bounds, paper)
                 found["rigpi_scheme"] = (rigpi.inertial, rigpi.covariance)
             for estimator, value in found.items():
                 estimates.setdefault((name, estimator), []).append(value)
