@@ -77,6 +77,8 @@ class Bench:
     """Noise draws per object (paper, mujoco)."""
     paper_optimizer: bool = False
     """Also run RigPI's own optimizer on the same recordings (paper; adds about 20 s per draw)."""
+    vlm_starts: bool = False
+    """Also run the Newton fit alone from far starts like the paper's VLM guesses (paper)."""
     draws: int = 20
     """Noise draws per object (crlb)."""
     device: str = "cpu"
@@ -160,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 from twin.bench.paper import bench_paper
 
-                bench_paper(command.seeds, paper_optimizer=command.paper_optimizer)
+                bench_paper(command.seeds, paper_optimizer=command.paper_optimizer, from_vlm_starts=command.vlm_starts)
     except (ValueError, RuntimeError, OSError) as exc:
         print(f"twin: error: {exc}", file=sys.stderr)
         return 1

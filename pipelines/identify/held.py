@@ -97,10 +97,8 @@ def identify_held(
     candidates = {"baseline": prior, "least_squares": ls.inertial}
     newton = None
     if method == "newton":
-        starts = [_clip_into_bounds(ls.inertial, prior, bounds)] + prior_starts(prior, bounds, config.starts - 1,
-                                                                                 config.seed)
-        newton = identify_free_body(windows_from_recordings(trials, config), X_tracked_body, starts, bounds, config,
-                                    progress)
+        newton = identify_free_body(windows_from_recordings(trials, config), X_tracked_body,
+                                    newton_starts(ls.inertial, prior, bounds, config), bounds, config, progress)
         candidates["newton"] = newton.inertial
 
     fits, impulse, traces = _replay(holdout or trials[0], X_tracked_body, candidates, config)
@@ -129,6 +127,13 @@ def windows_from_recordings(recordings, config: IdentifyConfig) -> ShootingWindo
             for r in recordings
         ]
     )
+
+
+def newton_starts(least_squares: Inertial, prior: Inertial, bounds: InertialBounds,
+                  config: IdentifyConfig) -> list[Inertial]:
+    """The Newton fit's starts: least squares first, then `config.starts - 1` from the prior's spread."""
+    return [_clip_into_bounds(least_squares, prior, bounds)] + prior_starts(prior, bounds, config.starts - 1,
+                                                                            config.seed)
 
 
 def _clip_into_bounds(inertial: Inertial, prior: Inertial, bounds: InertialBounds) -> Inertial:

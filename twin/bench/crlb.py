@@ -1,4 +1,5 @@
-"""`twin bench crlb`: the spread of our estimates against the Cramer-Rao bound, per parameter.
+"""`twin bench crlb`: the spread of our estimates (least squares and the Newton fit) against the
+Cramer-Rao bound, per parameter.
 
 The bound here is computed with the motion known exactly (the simulation's own
 kinematics) and only the wrench sensor's noise: white, Gaussian, its variance
@@ -42,8 +43,11 @@ def bench_crlb(draws: int = 20, duration_s: float = 10.0) -> list[dict]:
     from scipy.spatial.transform import Rotation, Slerp
 
     from assets import Inertial, Pose
-    from pipelines.identify import identify_least_squares
+    from assets.materials import material_range
+    from pipelines.identify import IdentifyConfig, InertialBounds, identify_free_body, identify_least_squares, make_windows
+    from pipelines.identify.held import newton_starts
     from pipelines.identify.least_squares import object_frame_from_pi
+    from pipelines.priors import uniform_density_prior
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
     from twin.bench.paper import paper_objects
 
@@ -67,26 +71,36 @@ def bench_crlb(draws: int = 20, duration_s: float = 10.0) -> list[dict]:
         _, J = object_frame_from_pi(_true_pi(truth, grasp), grasp.inverse())
         bound = J @ np.linalg.inv(fisher) @ J.T
 
-        estimates = []
+        prior = uniform_density_prior(mesh.copy(), material_range(None))
+        bounds = InertialBounds(prior.lower, prior.upper)
+        config = IdentifyConfig()
+        estimates: dict = {"least squares": [], "newton": []}
         for d in range(draws):
             tp, pos, quat, tw, f, tq = measure(motion, noise, np.random.default_rng(d))
             rot = Slerp(tp, Rotation.from_quat(quat))(np.clip(tw, tp[0], tp[-1]))
-            ls = identify_least_squares(tp, pos, quat, tw, rot.apply(f), rot.apply(tq), grasp.inverse())
-            est = ls.inertial
-            estimates.append([est.mass, *np.diag(est.inertia_matrix())])
-        estimates = np.asarray(estimates)
+            data = (tp, pos, quat, tw, rot.apply(f), rot.apply(tq))
+            ls = identify_least_squares(*data, grasp.inverse()).inertial
+            windows = make_windows(*data, window_s=config.window_s, substeps=config.substeps,
+                                   smoothing_hz=config.smoothing_hz)
+            starts = newton_starts(ls, prior.inertial, bounds, config)
+            fit = identify_free_body(windows, grasp.inverse(), starts, bounds, config).inertial
+            for label, est in (("least squares", ls), ("newton", fit)):
+                estimates[label].append([est.mass, *np.diag(est.inertia_matrix())])
         true = np.array([truth.mass, *np.diag(truth.inertia_matrix())])
-        for j, param in enumerate(names):
-            bound_std = float(np.sqrt(bound[index[j], index[j]]))
-            observed_std = float(estimates[:, j].std(ddof=1))
-            rows.append({
-                "object": name, "parameter": param, "bound_std_pct": 100 * bound_std / true[j],
-                "observed_std_pct": 100 * observed_std / true[j],
-                "bias_pct": float(100 * (estimates[:, j].mean() / true[j] - 1)),
-                "efficiency": bound_std**2 / observed_std**2,
-            })
-    print(f"{'object':7} {'param':6} {'bound std %':>11} {'observed std %':>14} {'bias %':>7} {'efficiency':>10}")
+        for label, values in estimates.items():
+            values = np.asarray(values)
+            for j, param in enumerate(names):
+                bound_std = float(np.sqrt(bound[index[j], index[j]]))
+                observed_std = float(values[:, j].std(ddof=1))
+                rows.append({
+                    "object": name, "estimator": label, "parameter": param,
+                    "bound_std_pct": 100 * bound_std / true[j], "observed_std_pct": 100 * observed_std / true[j],
+                    "bias_pct": float(100 * (values[:, j].mean() / true[j] - 1)),
+                    "efficiency": bound_std**2 / observed_std**2,
+                })
+    print(f"{'object':7} {'estimator':13} {'param':6} {'bound std %':>11} {'observed std %':>14} {'bias %':>7} "
+          f"{'efficiency':>10}")
     for r in rows:
-        print(f"{r['object']:7} {r['parameter']:6} {r['bound_std_pct']:11.3f} {r['observed_std_pct']:14.3f} "
-              f"{r['bias_pct']:+7.3f} {r['efficiency']:10.3f}")
+        print(f"{r['object']:7} {r['estimator']:13} {r['parameter']:6} {r['bound_std_pct']:11.3f} "
+              f"{r['observed_std_pct']:14.3f} {r['bias_pct']:+7.3f} {r['efficiency']:10.3f}")
     return rows
