@@ -143,8 +143,16 @@ def identify_free_body(
     else:
         rollout = FreeBodyRollout(windows, X_tracked_body, sets=K, device=config.device)
         weight = channel_weights(rollout.residuals(thetas)[:, 0], S * W)
-        theta, corr, rate, history, start_losses = levenberg_marquardt(
-            rollout, jacobian, thetas, bounds, config, weight, progress)
+        fit = levenberg_marquardt(rollout, jacobian, thetas, None, None, bounds, config, weight, progress)
+        # The weights came from the first start's residuals; a far start would set them badly, so
+        # every start is refined once more with weights from the best fit's (uncorrected) residuals.
+        best = int(np.argmin(fit[4]))
+        weight = channel_weights(rollout.residuals(fit[0])[:, best], S * W)
+        refit = levenberg_marquardt(rollout, jacobian, *fit[:3], bounds, config, weight, progress)
+        best = int(np.argmin(refit[4]))
+        theta, corr, rate = (x[best] for x in refit[:3])
+        history = fit[3][best] + refit[3][best][1:]
+        start_losses = refit[4].tolist()
     point = [np.repeat(x[None], K, axis=0) for x in (theta, corr, rate)]  # the Jacobian rollout holds K points
     r0, J_theta, J_corr = window_jacobians(jacobian, *point, weight)
     covariance = window_robust_covariance(r0[0], J_theta[0], J_corr[0], theta)
@@ -247,19 +255,20 @@ def window_robust_covariance(r0, J_theta, J_corr, theta) -> np.ndarray:
     return Jp @ cov_theta @ Jp.T
 
 
-def levenberg_marquardt(rollout, jacobian, thetas, bounds: InertialBounds, config: IdentifyConfig, weight,
-                        progress=None):
-    """Levenberg-Marquardt on theta from K starts at once (`rollout.sets` = K, `jacobian.sets` =
-    K * JACOBIAN_SETS), each window's start
-    correction solved alongside and eliminated in closed form (Schur complement).
+def levenberg_marquardt(rollout, jacobian, thetas, corr, rate, bounds: InertialBounds, config: IdentifyConfig,
+                        weight, progress=None):
+    """Levenberg-Marquardt on theta [K, 10] from K starts at once (`rollout.sets` = K, `jacobian.sets` =
+    K * JACOBIAN_SETS), each window's start correction [K, W, 6] and rate (None: zero) solved alongside
+    and eliminated in closed form (Schur complement).
 
-    Gradients come from the Warp tape, Gauss-Newton curvature from one batched forward-difference
-    rollout per iteration. Returns the lowest start's theta, corrections, correction rates and loss
-    history, and every start's final loss.
+    Gradients come from the Warp tape, Gauss-Newton curvature from one batched central-difference
+    rollout per iteration. Returns every start's theta, corrections, correction rates, loss history
+    and final loss.
     """
     K, W = thetas.shape[0], rollout.windows.window_count
     theta = thetas.copy()
-    corr, rate = np.zeros((K, W, 6)), np.zeros((K, W, 6))
+    corr = np.zeros((K, W, 6)) if corr is None else corr.copy()
+    rate = np.zeros((K, W, 6)) if rate is None else rate.copy()
     lam = np.full(K, 1e-3)
     sqrt_w = np.sqrt(weight)[:, None, None, :]
     sqrt_pen = np.sqrt(config.penalty_weight)
@@ -314,8 +323,7 @@ def levenberg_marquardt(rollout, jacobian, thetas, bounds: InertialBounds, confi
             progress(it + 1, float(loss.min()))
         if not active.any():
             break
-    best = int(np.argmin(loss))
-    return theta[best], corr[best], rate[best], histories[best], [float(x) for x in loss]
+    return theta, corr, rate, histories, loss
 
 
 def paper_gradient_descent(rollout, theta, bounds: InertialBounds, config: IdentifyConfig, progress=None):
