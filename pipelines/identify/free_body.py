@@ -154,8 +154,8 @@ def identify_free_body(
         history = fit[3][best] + refit[3][best][1:]
         start_losses = refit[4].tolist()
     point = [np.repeat(x[None], K, axis=0) for x in (theta, corr, rate)]  # the Jacobian rollout holds K points
-    r0, J_theta, J_corr = window_jacobians(jacobian, *point, weight)
-    covariance = window_robust_covariance(r0[0], J_theta[0], J_corr[0], theta)
+    gram, jtr = window_normal_equations(jacobian, *point, weight)
+    covariance = window_robust_covariance(gram[0], jtr[0], theta)
     m, c, I = physical_from_theta(theta)
     return Identification(
         inertial=Inertial(m, c, I),
@@ -208,10 +208,11 @@ def channel_weights(residual: np.ndarray, count: int) -> np.ndarray:
 JACOBIAN_SETS = 1 + 2 * (THETA_SIZE + 12)
 
 
-def window_jacobians(rollout: FreeBodyRollout, theta, corr, corr_rate, weight):
-    """Weighted residuals r [K, W, n] at K points and their Jacobians w.r.t. theta [K, W, n, 10] and each
-    window's own start corrections [K, W, n, 12], by central differences, all in one rollout of
-    `rollout.sets` = K * JACOBIAN_SETS parameter sets (windows do not interact).
+def window_normal_equations(rollout: FreeBodyRollout, theta, corr, corr_rate, weight):
+    """Per point and window, the Gauss-Newton blocks of the weighted residuals in theta (first 10 columns)
+    and the window's own 12 start corrections: J^T J [K, W, 22, 22] and J^T r [K, W, 22], by central
+    differences, all in one rollout of `rollout.sets` = K * JACOBIAN_SETS parameter sets (windows do
+    not interact).
 
     theta [K, 10]; corr, corr_rate [K, W, 6].
     """
@@ -225,29 +226,27 @@ def window_jacobians(rollout: FreeBodyRollout, theta, corr, corr_rate, weight):
     c = np.concatenate([corr, corr_rate], axis=-1)[:, None].repeat(P, axis=1)  # [K, P, W, 12]
     c[:, 1 + THETA_SIZE:1 + n] += (eps_corr[:, None] * np.eye(12))[None, :, None, :]
     c[:, 1 + n + THETA_SIZE:] -= (eps_corr[:, None] * np.eye(12))[None, :, None, :]
-    r = rollout.residuals(th.reshape(K * P, THETA_SIZE), c[..., :6].reshape(K * P, W, 6),
-                          c[..., 6:].reshape(K * P, W, 6))
-    r = (r * np.sqrt(weight)[:, None, None, :]).reshape(r.shape[0], K, P, W, 6)
-    r = r.transpose(1, 2, 3, 0, 4).reshape(K, P, W, -1)  # [K, P, W, n_residuals]
-    eps = np.concatenate([eps_theta, np.broadcast_to(eps_corr, (K, 12))], axis=1)  # [K, n]
-    J = ((r[:, 1:1 + n] - r[:, 1 + n:]) / (2 * eps[:, :, None, None])).transpose(0, 2, 3, 1)
-    return r[:, 0], J[..., :THETA_SIZE], J[..., THETA_SIZE:]
+    steps = np.concatenate([eps_theta, np.broadcast_to(eps_corr, (K, 12))], axis=1)
+    return rollout.normal_equations(th.reshape(K * P, THETA_SIZE), c[..., :6].reshape(K * P, W, 6),
+                                    c[..., 6:].reshape(K * P, W, 6), steps, weight)
 
 
-def window_robust_covariance(r0, J_theta, J_corr, theta) -> np.ndarray:
+def window_robust_covariance(gram, jtr, theta) -> np.ndarray:
     """Covariance of (mass, com, inertia) clustered by window (sandwich estimator), from one point's
-    residuals [W, n] and Jacobians [W, n, 10], [W, n, 12] (see `window_jacobians`).
+    per-window J^T J [W, 22, 22] and J^T r [W, 22] (see `window_normal_equations`).
 
     Within a window the residuals are correlated (integrated sensor noise), so
     sigma^2 (J^T J)^-1 would be too narrow; windows are nearly independent, so
     the per-window scores give an honest spread. Start corrections are profiled
     out per window.
     """
-    W = len(r0)
-    # project out what each window's own start correction can absorb
-    Jt = J_theta - J_corr @ np.linalg.pinv(J_corr) @ J_theta
-    H = np.einsum("wni,wnj->ij", Jt, Jt)
-    scores = np.einsum("wni,wn->wi", Jt, r0)
+    W = len(gram)
+    t, c = slice(0, THETA_SIZE), slice(THETA_SIZE, None)
+    # eliminate what each window's own start correction can absorb (Schur complement)
+    Hcc_inv = np.linalg.pinv(gram[:, c, c])
+    Hct = gram[:, c, t]
+    H = np.sum(gram[:, t, t] - Hct.transpose(0, 2, 1) @ Hcc_inv @ Hct, axis=0)
+    scores = jtr[:, t] - np.einsum("wci,wcd,wd->wi", Hct, Hcc_inv, jtr[:, c])
     H_inv = np.linalg.pinv(H)
     meat = scores.T @ scores * W / max(W - THETA_SIZE, 1)
     cov_theta = H_inv @ meat @ H_inv
@@ -282,13 +281,13 @@ def levenberg_marquardt(rollout, jacobian, thetas, corr, rate, bounds: InertialB
     histories = [[float(x)] for x in loss]
     active = np.ones(K, bool)
     for it in range(config.max_iterations):
-        _, J_theta, J_corr = window_jacobians(jacobian, theta, corr, rate, weight)
+        gram, _ = window_normal_equations(jacobian, theta, corr, rate, weight)
         _, g_theta, g_corr, g_rate = rollout.loss_and_grad(theta, corr, rate, weight, True)
         g_c = 0.5 * np.concatenate([g_corr, g_rate], axis=-1)  # [K, W, 12]
-        Hcc_inv = np.linalg.pinv(np.einsum("kwni,kwnj->kwij", J_corr, J_corr) + 1e-12 * np.eye(12))
-        Hct = np.einsum("kwni,kwnj->kwij", J_corr, J_theta)  # [K, W, 12, 10]
+        Hcc_inv = np.linalg.pinv(gram[..., THETA_SIZE:, THETA_SIZE:] + 1e-12 * np.eye(12))
+        Hct = gram[..., THETA_SIZE:, :THETA_SIZE]  # [K, W, 12, 10]
         HciHct = Hcc_inv @ Hct
-        H = np.einsum("kwni,kwnj->kij", J_theta, J_theta) - np.einsum("kwci,kwcj->kij", Hct, HciHct)
+        H = gram[..., :THETA_SIZE, :THETA_SIZE].sum(axis=1) - np.einsum("kwci,kwcj->kij", Hct, HciHct)
         g = 0.5 * g_theta - np.einsum("kwci,kwc->ki", HciHct, g_c)
         for k in range(K):
             v, dv = bounds.violation(flat_physical(theta[k]))

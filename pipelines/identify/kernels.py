@@ -155,3 +155,45 @@ def eval_weighted_squares(
     j, w, k = wp.tid()
     r = residual[j, w, k]
     wp.atomic_add(loss, 0, weight[j, k] * r * r)
+
+
+# columns of the Gauss-Newton blocks: theta (10) and one window's start corrections (12)
+NORMAL_COLUMNS = 22
+vec_columns = wp.types.vector(length=NORMAL_COLUMNS, dtype=float)
+mat_columns = wp.types.matrix(shape=(NORMAL_COLUMNS, NORMAL_COLUMNS), dtype=float)
+
+
+@wp.kernel
+def eval_window_normal_equations(
+    residual: wp.array3d[float],
+    sqrt_weight: wp.array2d[float],
+    step: wp.array2d[float],
+    windows_per_set: int,
+    sets_per_point: int,
+    gram: wp.array2d[mat_columns],
+    jtr: wp.array2d[vec_columns],
+):
+    """Per point k and window w, from a central-difference rollout: J^T J and J^T r of the weighted
+    residuals, J column a = (r(+step a) - r(-step a)) / (2 step a).
+
+    Sets of point k: k P (the point), k P + 1 + a (+step a), k P + 1 + n + a (-step a). Assembled
+    here so that only 22 x 22 numbers per window leave the device, not the residuals.
+    """
+    k, w = wp.tid()
+    n = NORMAL_COLUMNS
+    base = k * sets_per_point
+    point = base * windows_per_set + w
+    G = mat_columns()
+    g = vec_columns()
+    for s in range(sqrt_weight.shape[0]):
+        for c in range(6):
+            j = vec_columns()
+            for a in range(n):
+                plus = (base + 1 + a) * windows_per_set + w
+                minus = (base + 1 + n + a) * windows_per_set + w
+                difference = residual[s + 1, plus, c] - residual[s + 1, minus, c]
+                j[a] = difference * sqrt_weight[s, c] / (2.0 * step[k, a])
+            G += wp.outer(j, j)
+            g += j * (residual[s + 1, point, c] * sqrt_weight[s, c])
+    gram[k, w] = G
+    jtr[k, w] = g

@@ -12,7 +12,10 @@ from .kernels import (
     assign_inertial_params_to_model,
     eval_tracked_pose_error,
     eval_weighted_squares,
+    eval_window_normal_equations,
+    mat_columns,
     set_window_start_state,
+    vec_columns,
 )
 from .windows import ShootingWindows
 
@@ -143,6 +146,31 @@ class FreeBodyRollout:
         self._run(("forward", momentum_scaled), lambda: self._forward(momentum_scaled))
         S, W = self.windows.sample_count, self.windows.window_count
         return self.residual.numpy()[1:].astype(float).reshape(S, self.sets, W, 6)
+
+    def normal_equations(self, theta, correction, correction_rate, steps: np.ndarray,
+                         weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Run the sets (K points, each laid out as `eval_window_normal_equations` reads them) and
+        return per point and window J^T J [K, W, n, n] and J^T r [K, W, n] of the weighted residuals.
+
+        steps [K, n]: each column's difference step; weight [S, 6].
+        """
+        import warp as wp
+
+        self._load(theta, correction, correction_rate)
+        self._run(("forward", True), lambda: self._forward(True))
+        K = len(steps)
+        W = self.windows.window_count
+        gram = wp.zeros((K, W), dtype=mat_columns, device=self.device)
+        jtr = wp.zeros((K, W), dtype=vec_columns, device=self.device)
+        wp.launch(
+            eval_window_normal_equations,
+            dim=(K, W),
+            inputs=[self.residual, wp.array(np.sqrt(weight).astype(np.float32), dtype=float, device=self.device),
+                    wp.array(steps.astype(np.float32), dtype=float, device=self.device), W, self.sets // K],
+            outputs=[gram, jtr],
+            device=self.device,
+        )
+        return gram.numpy().astype(float), jtr.numpy().astype(float)
 
     def loss_and_grad(
         self, theta, correction, correction_rate, weight: np.ndarray, momentum_scaled: bool

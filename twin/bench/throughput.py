@@ -5,8 +5,9 @@ world each). N objects are N copies of those windows in one model, which is
 the work of identifying N such objects at once (they share the rollout; the
 per-object parameters are a matter of indexing). A Levenberg-Marquardt
 iteration is what `levenberg_marquardt` runs per step from one start: one
-rollout of the central-difference Jacobian (45 parameter sets side by side),
-one taped forward/backward pass for the gradient, one trial rollout.
+rollout of the central-difference Jacobian (45 parameter sets side by side)
+with its per-window normal equations assembled on the device, one taped
+forward/backward pass for the gradient, one trial rollout.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ def bench_throughput(device: str = "cpu", object_counts: tuple[int, ...] = (1, 1
 
     from assets import Inertial, Pose
     from pipelines.identify import IdentifyConfig, concat_windows, make_windows
-    from pipelines.identify.free_body import JACOBIAN_SETS, window_jacobians
+    from pipelines.identify.free_body import JACOBIAN_SETS, window_normal_equations
     from pipelines.identify.inertia import theta_from_physical
     from pipelines.identify.rollout import FreeBodyRollout
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
@@ -56,7 +57,7 @@ def bench_throughput(device: str = "cpu", object_counts: tuple[int, ...] = (1, 1
             wp.synchronize_device(device)
             return (time.perf_counter() - t0) / repeats
 
-        jac_s = timed(lambda: window_jacobians(jacobian, theta, zero, zero, weight))
+        jac_s = timed(lambda: window_normal_equations(jacobian, theta, zero, zero, weight))
         grad_s = timed(lambda: rollout.loss_and_grad(theta, zero, zero, weight, True))
         forward_s = timed(lambda: rollout.residuals(theta, zero, zero))
         rows.append({"device": device, "objects": count, "worlds": W, "steps": windows.step_count,
