@@ -201,9 +201,10 @@ def _object_mesh(config: BuildConfig):
 
 
 def _progress_logger(log):
-    def progress(evaluation: int, loss: float):
-        if evaluation == 1 or evaluation % 25 == 0:
-            log(f"  evaluation {evaluation}: loss {loss:.6g}")
+    def progress(iteration: int, loss: float):
+        # Levenberg-Marquardt takes a handful of iterations; the paper's optimizer takes hundreds of steps
+        if iteration <= 10 or iteration % 25 == 0:
+            log(f"  iteration {iteration}: loss {loss:.6g}")
     return progress
 
 

@@ -148,7 +148,9 @@ def identify_free_body(
         # every start is refined once more with weights from the best fit's (uncorrected) residuals.
         best = int(np.argmin(fit[4]))
         weight = channel_weights(rollout.residuals(fit[0])[:, best], S * W)
-        refit = levenberg_marquardt(rollout, jacobian, *fit[:3], bounds, config, weight, progress)
+        done = len(fit[3][best]) - 1
+        refit = levenberg_marquardt(rollout, jacobian, *fit[:3], bounds, config, weight,
+                                    progress and (lambda it, loss: progress(done + it, loss)))
         best = int(np.argmin(refit[4]))
         theta, corr, rate = (x[best] for x in refit[:3])
         history = fit[3][best] + refit[3][best][1:]
