@@ -40,6 +40,10 @@ class Build:
     Any failure falls back to the offline prior."""
     vlm_model: str | None = None
     """Model name on the --vlm server (an image-capable one)."""
+    kind: Literal["free", "sliding", "prismatic", "revolute"] | None = None
+    """Kind of interaction; default: chosen from the first recording's motion by BIC."""
+    base_mesh: Path | None = None
+    """Drawers and doors: mesh of the fixed base (world frame, metres), written with the part."""
 
 
 @dataclass(frozen=True)
@@ -99,7 +103,7 @@ def _run_build(args: Build) -> None:
             source=args.source, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
             name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
             optimizer=args.optimizer,
-            vlm=args.vlm, vlm_model=args.vlm_model,
+            vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind, base_mesh=args.base_mesh,
         ),
         log=_log,
     )

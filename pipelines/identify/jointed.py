@@ -70,7 +70,8 @@ class JointedIdentification:
     normal to the axis along `basis`), "friction" [N or N m].
     least_squares: the same names from the start fit. inertial: the body in the
     object frame (prior where not determined). basis: two unit world vectors
-    normal to the axis. fits: windowed replay RMSE of q before (prior) and after.
+    normal to the axis. fits: windowed replay RMSE of q and of the tracked frame's
+    position on the held-out recording at the prior and at each estimate.
     """
 
     names: tuple[str, ...]
@@ -81,6 +82,8 @@ class JointedIdentification:
     basis: np.ndarray
     fits: dict = field(default_factory=dict)
     loss_history: tuple[float, ...] = ()
+    selected: str = "newton"
+    """"newton" or "least_squares": the one that predicts the held-out recording better (newton without one)."""
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])
@@ -94,6 +97,7 @@ class JointedIdentification:
             "identified": {n: {"value": self.value(n), "std": self.std(n)} for n in self.names},
             "least_squares": self.least_squares,
             "fits": self.fits,
+            "selected": self.selected,
             "loss_history": list(self.loss_history),
         }
 
@@ -121,7 +125,9 @@ class _Windows:
     effort: np.ndarray     # [steps, W] zero-order hold
 
 
-def _windows(recording, joint: JointFit, config: JointedConfig) -> _Windows:
+def joint_windows(recording, joint: JointFit, config: JointedConfig) -> _Windows:
+    """Back-to-back windows of motion: measured q at the pose rate on a uniform grid, smoothed start
+    states, and the joint effort held over each Featherstone step."""
     t = recording.pose.t_s
     q = joint_coordinates(joint, recording.pose)
     period = float(np.median(np.diff(t)))
@@ -317,7 +323,7 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
     least_squares = {n: {"value": float(v), "std": float(np.sqrt(cov_ls[i, i]))}
                      for i, (n, v) in enumerate(zip(body.names, x_ls))}
 
-    windows = _concat([_windows(r, joint, config) for r in trials])
+    windows = _concat([joint_windows(r, joint, config) for r in trials])
     W = windows.q.shape[1]
     P = len(body.names)
     scale = np.maximum(np.abs(x_ls), 1e-6)
@@ -405,24 +411,27 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
     covariance = bread @ (score.T @ score) * (W / max(W - 1, 1)) @ bread
 
     fits = {"window_s": config.window_s, "trial_rmse_q": float(np.sqrt(np.mean(r * r)))}
+    selected = "newton"
     if holdout is not None:
         fits["holdout"] = {
-            "prior": _replay_rmse(holdout, joint, placement, prior, body, body.prior_values(0.0), config),
-            "final": _replay_rmse(holdout, joint, placement, prior, body, p, config),
+            name: _replay_rmse(holdout, joint, placement, prior, body, values, config)
+            for name, values in (("prior", body.prior_values(0.0)), ("least_squares", x_ls), ("newton", p))
         }
+        if fits["holdout"]["least_squares"]["rmse_q"] < fits["holdout"]["newton"]["rmse_q"]:
+            selected, p, covariance = "least_squares", x_ls, cov_ls
     return JointedIdentification(body.names, p, covariance, least_squares, body.inertial(p), body.basis,
-                                 fits, tuple(history))
+                                 fits, tuple(history), selected)
 
 
 def _replay_rmse(recording, joint, placement, prior, body: _BodyMap, p, config: JointedConfig) -> dict:
     """Windowed replay of `recording` from measured starts: RMSE of q and of the tracked frame's position."""
-    w = _windows(recording, joint, config)
+    w = joint_windows(recording, joint, config)
     q = _Rollout(w, 1, joint, placement, prior, config.friction_smoothing).run(
         [body.inertial(p)], np.array([p[-1]]), np.zeros((1, w.q.shape[1])), np.zeros((1, w.q.shape[1])))[:, 0]
-    return _q_and_position_rmse(joint, q[1:], w.q[1:])
+    return q_and_position_rmse(joint, q[1:], w.q[1:])
 
 
-def _q_and_position_rmse(joint: JointFit, q_sim: np.ndarray, q_meas: np.ndarray) -> dict:
+def q_and_position_rmse(joint: JointFit, q_sim: np.ndarray, q_meas: np.ndarray) -> dict:
     """RMSE of q and of the tracked frame's position [m] between two arrays of q on the same joint."""
     p0 = np.asarray(joint.tracked_at_zero.position)
     if joint.type == "prismatic":
