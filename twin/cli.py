@@ -48,10 +48,12 @@ class Build:
 
 @dataclass(frozen=True)
 class Synth:
-    """Make a sample with known truth: an RGB-D scan and two recordings of a held object."""
+    """Make a sample with known truth: an RGB-D scan and two recordings of a held object or a jointed part."""
 
     output: Annotated[Path, tyro.conf.arg(aliases=("-o",))] = Path("samples/cube")
     """Directory to write (scan/, trial.mcap, heldout.mcap, truth.json)."""
+    object: Literal["drawer", "cabinet_door", "oven_door"] | None = None
+    """A part on a joint (RigPI's drawer, cabinet door, oven door analogues) instead of a held --shape."""
     shape: Literal["cube", "sphere"] = "cube"
     size_m: float = 0.04
     """Cube edge or sphere diameter [m]."""
@@ -111,6 +113,14 @@ def _run_build(args: Build) -> None:
 
 def _run_synth(args: Synth) -> None:
     import trimesh
+
+    if args.object is not None:
+        from pipelines.synth.sample import JointedSampleConfig, make_jointed_sample
+
+        _log(f"synthesising {args.object} into {args.output}")
+        make_jointed_sample(args.output, JointedSampleConfig(object=args.object, seed=args.seed))
+        _log(f"wrote {args.output}")
+        return
 
     from pipelines.synth.sample import HeldSampleConfig, make_held_sample
 

@@ -25,9 +25,11 @@ def _prior_estimate(value, lower, upper, prior_doc=None):
     """A quantity taken from the prior: its 95 % interval is the prior's bounds C."""
     from assets import Estimate
 
+    if np.ndim(value) == 0:
+        return Estimate(float(value), float((upper - lower) / 4), source="prior",
+                        interval95=(float(lower), float(upper)), prior=prior_doc)
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
-    return Estimate(value, tuple(np.ravel((upper - lower) / 4)) if np.ndim(value) else float((upper - lower) / 4),
-                    source="prior", interval95=(lower, upper), prior=prior_doc)
+    return Estimate(value, (upper - lower) / 4, source="prior", interval95=(lower, upper), prior=prior_doc)
 
 
 def jointed_theta(identified, prior, joint_type: str):
@@ -36,7 +38,7 @@ def jointed_theta(identified, prior, joint_type: str):
 
     inertial = identified.inertial
     lo, hi = np.asarray(prior.lower), np.asarray(prior.upper)
-    ci = lambda v, s: (v - 1.96 * s, v + 1.96 * s)  # noqa: E731
+    ci = lambda v, s: (float(v - 1.96 * s), float(v + 1.96 * s))  # noqa: E731
     friction = Estimate(identified.value("friction"), identified.std("friction"),
                         interval95=ci(identified.value("friction"), identified.std("friction")))
     # the tensor is the prior's, scaled by what was measured (mass, or the moment about the axis)
