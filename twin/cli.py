@@ -67,7 +67,7 @@ class Bench:
     """Benchmarks that print a table.
 
     sample: cold and warm builds of a synthetic sample against its truth.
-    paper: RigPI's cube, sphere and apple, held and moved, several noise draws each.
+    paper: RigPI's cube, sphere and apple, held and moved, then its drawer, cabinet door and oven door; several noise draws each.
     priors: RigPI's six objects: prior error (library, the paper's VLM answers, fusion) and whether C holds the truth.
     throughput: time per identification iteration for 1 and many objects batched, on --device.
     crlb: spread of the estimates over --draws noise draws against the Cramer-Rao bound.
@@ -91,6 +91,8 @@ class Bench:
     """Objects batched per run (throughput)."""
     quick: bool = False
     """A subset that runs in about a minute (reconstruct)."""
+    jointed_only: bool = False
+    """paper: only the drawer, cabinet door and oven door."""
 
 
 def _log(message: str) -> None:
@@ -171,6 +173,10 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.priors import bench_priors
 
                 bench_priors()
+            elif command.jointed_only:
+                from twin.bench.paper_jointed import bench_paper_jointed
+
+                bench_paper_jointed(command.seeds)
             else:
                 from twin.bench.paper import bench_paper
 
