@@ -115,6 +115,9 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
             friction=_num((mu, _TORSION_FRICTION, _ROLL_FRICTION)),
         )
 
+    if asset.joint is not None and asset.geometry.base:
+        # the joint guides the part through the base (a carcass around a drawer): they must not collide
+        ET.SubElement(ET.SubElement(root, "contact"), "exclude", body1=f"{asset.name}_base", body2=asset.name)
     ET.indent(root, space="  ")
     out_dir.mkdir(parents=True, exist_ok=True)
     path.write_text(ET.tostring(root, encoding="unicode") + "\n")
