@@ -78,7 +78,8 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     jconfig = JointedConfig()
     identified = timer.run("identify (Featherstone)", identify_jointed, trials, fit, placement, prior.inertial,
                            holdout, jconfig)
-    q_all = np.concatenate([joint_coordinates(fit, t.pose) for t in trials])
+    # every recording shows travel the part can make, the held-out one too
+    q_all = np.concatenate([joint_coordinates(fit, t.pose) for t in (*trials, *filter(None, [holdout]))])
     lower, upper = joint_limits(fit.type, q_all)
     joint = Joint(fit.type, tuple(fit.axis), tuple(fit.origin), lower, upper)
     theta = jointed_theta(identified, prior, fit.type)
