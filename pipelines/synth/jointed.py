@@ -321,3 +321,47 @@ def write_jointed_recording(path, obj: JointedObject, motion: JointedMotion, noi
         wrench=WrenchTrack(t_wrench, force, torque, "/ft_sensor/wrench", "gripper"),
         joints=JointTrack(t_pose, (f"{obj.name}_joint",), q[:, None], motion.qd[idx][:, None]),
     )
+
+
+def noisy_pose_recording(t_s, position, rotation: Rotation, rng: np.random.Generator, noise=None):
+    """A Recording of a tracked frame's poses [m] with the tracker's noise, and a wrench of sensor noise only:
+    for what reads the motion alone (kind detection)."""
+    from pathlib import Path
+
+    from ..logs import PoseTrack, Recording, WrenchTrack
+    from .held import SensorNoise
+
+    noise = noise or SensorNoise()
+    position = position + rng.normal(0, noise.position_sigma_m, position.shape)
+    rotation = rotation * Rotation.from_rotvec(rng.normal(0, noise.rotation_sigma_rad, (len(t_s), 3)))
+    pose = PoseTrack(t_s, position, rotation.as_quat(), "world", "gripper", "/tracker/pose")
+    t_w = np.arange(0, t_s[-1], 1.0 / 500.0)
+    wrench = WrenchTrack(t_w, rng.normal(0, noise.force_sigma_n, (len(t_w), 3)),
+                         rng.normal(0, noise.torque_sigma_nm, (len(t_w), 3)), "/ft_sensor/wrench", "world")
+    return Recording(Path("synthetic.mcap"), pose, wrench, wrench, None, None, float(t_s[-1]))
+
+
+def smooth_signals(rng: np.random.Generator, t_s: np.ndarray, amplitude: float, dims: int) -> np.ndarray:
+    """[len(t_s), dims] smooth signals from 0 at t = 0: sums of three sines in 0.2-1.5 Hz."""
+    f = rng.uniform(0.2, 1.5, (dims, 3))
+    ph = rng.uniform(0, 2 * np.pi, (dims, 3))
+    return amplitude * (np.sin(2 * np.pi * f[None] * t_s[:, None, None] + ph) - np.sin(ph)).sum(-1) / 3
+
+
+def random_joint_recording(rng: np.random.Generator, joint_type: str, duration_s: float = 4.0):
+    """A random drawer or door seen by the tracker: any axis direction, a revolute axis 5-40 cm from the
+    handle, a random handle orientation and travel (up to 25 cm or 1.2 rad). Returns (Recording, axis,
+    point on the axis or None)."""
+    t = np.arange(0, duration_s, 0.005)
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    p0 = rng.uniform(-0.5, 0.5, 3) + [0.5, 0, 0.5]
+    R0 = Rotation.random(random_state=rng.integers(1 << 31))
+    if joint_type == "revolute":
+        lever = np.cross(axis, rng.normal(size=3))
+        point = p0 - rng.uniform(0.05, 0.4) * lever / np.linalg.norm(lever)
+        q = np.abs(smooth_signals(rng, t, 1.2, 1)[:, 0])
+        R_q = Rotation.from_rotvec(np.outer(q, axis))
+        return noisy_pose_recording(t, point + R_q.apply(p0 - point), R_q * R0, rng), axis, point
+    q = np.abs(smooth_signals(rng, t, 0.25, 1)[:, 0])
+    return noisy_pose_recording(t, p0 + np.outer(q, axis), Rotation.concatenate([R0] * len(t)), rng), axis, None
