@@ -213,6 +213,10 @@ class Joint:
     damping: float = 0.0
     stiffness: float = 0.0
     spring_ref: float = 0.0
+    axis_std_rad: float | None = None
+    """1-sigma angle of the axis direction's error, when estimated from motion [rad]."""
+    origin_std_m: tuple[float, float, float] | None = None
+    """1-sigma error of `origin` per world axis across the axis (revolute) [m]."""
 
 
 @dataclass(frozen=True)

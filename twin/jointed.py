@@ -81,7 +81,8 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     # every recording shows travel the part can make, the held-out one too
     q_all = np.concatenate([joint_coordinates(fit, t.pose) for t in (*trials, *filter(None, [holdout]))])
     lower, upper = joint_limits(fit.type, q_all)
-    joint = Joint(fit.type, tuple(fit.axis), tuple(fit.origin), lower, upper)
+    joint = Joint(fit.type, tuple(fit.axis), tuple(fit.origin), lower, upper, axis_std_rad=fit.axis_std_rad,
+                  origin_std_m=tuple(fit.origin_std_m))
     theta = jointed_theta(identified, prior, fit.type)
     held = identified.fits.get("holdout", {})
     metrics = lambda d: FitMetrics(d["rmse_position_m"], d["rmse_q"] if fit.type == "revolute" else 0.0,  # noqa: E731

@@ -35,6 +35,7 @@ def test_build_drawer_sample(tmp_path: Path):
         assert lo[k][k] <= truth["inertia"][k][k] <= hi[k][k]
     joint = doc["joint"]
     assert joint["type"] == "prismatic"
+    assert 0 < joint["axis_std_rad"] < 0.01
     travel = doc["provenance"]["kind"]["joint"]["observed_travel"]  # of the trial; the held-out one counts too
     assert joint["lower"] < travel[0] and joint["upper"] > travel[1]
     assert len(doc["provenance"]["validation"]) == 4
