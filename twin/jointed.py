@@ -66,7 +66,7 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     """Identify the part on its joint, export base + part + joint, validate, replay the held-out trial in MuJoCo."""
     import trimesh
 
-    from assets import Asset, Fit, FitMetrics, Geometry, Joint, Material, write_asset
+    from assets import Asset, Fit, FitMetrics, Geometry, Joint, Material, asset_to_json, write_asset
     from exporters import export_all
     from pipelines.identify.jointed import JointedConfig, identify_jointed
     from pipelines.identify.kind import joint_coordinates
@@ -113,7 +113,7 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
             fit=Fit(metrics(held["prior"]), metrics(held[identified.selected]), jconfig.window_s) if held else None,
         )
         paths = timer.run("export", export_all, asset, tmp)
-        files = {**paths.to_json(relative_to=tmp)}
+        files = {**paths.to_json(relative_to=tmp), **({"report": "report.html"} if identified.traces else {})}
         validation = timer.run("validate", validate_jointed_exports, asset, tmp, files)
         replay = {}
         if holdout is not None:
@@ -134,6 +134,16 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
         }
         asset = Asset(**{**asset.__dict__, "files": files, "provenance": provenance})
         write_asset(asset, tmp / "asset.json")
+        if identified.traces:
+            from twin.report import write_report
+
+            tr = identified.traces
+            write_report(tmp / "report.html", asset_to_json(asset), identified.loss_history, {
+                "t_s": tr["t_s"].reshape(-1), "window_s": jconfig.window_s,
+                "measured_position": fit.tracked_position(tr["measured"]).reshape(-1, 3),
+                "baseline_position": fit.tracked_position(tr["prior"]).reshape(-1, 3),
+                "final_position": fit.tracked_position(tr["kept"]).reshape(-1, 3),
+            })
         _replace_dir(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

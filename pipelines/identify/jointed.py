@@ -84,6 +84,8 @@ class JointedIdentification:
     loss_history: tuple[float, ...] = ()
     selected: str = "newton"
     """"newton" or "least_squares": the one that predicts the held-out recording better (newton without one)."""
+    traces: dict | None = None
+    """Held-out replay: "t_s", "measured", "prior", "kept" q [m or rad], each [S, W] (None without a held-out)."""
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])
@@ -120,6 +122,7 @@ class _Windows:
     dt_s: float
     substeps: int
     q: np.ndarray          # [S+1, W] measured q at samples
+    t_s: np.ndarray        # [S, W] times of samples 1..S
     q_start: np.ndarray    # [W] smoothed
     qd_start: np.ndarray   # [W]
     effort: np.ndarray     # [steps, W] zero-order hold
@@ -150,11 +153,12 @@ def joint_windows(recording, joint: JointFit, config: JointedConfig) -> _Windows
     t_step = grid[starts][None, :] + dt * np.arange(steps)[:, None]
     idx = np.clip(np.searchsorted(t_wrench, t_step + 1e-9, side="right") - 1, 0, len(t_wrench) - 1)
     sample_idx = starts[None, :] + np.arange(samples + 1)[:, None]
-    return _Windows(dt, config.substeps, qg[sample_idx], qs[starts], qds[starts], tau[idx])
+    return _Windows(dt, config.substeps, qg[sample_idx], grid[sample_idx[1:]], qs[starts], qds[starts], tau[idx])
 
 
 def _concat(parts: list[_Windows]) -> _Windows:
     return _Windows(parts[0].dt_s, parts[0].substeps, np.concatenate([p.q for p in parts], 1),
+                    np.concatenate([p.t_s for p in parts], 1),
                     np.concatenate([p.q_start for p in parts]), np.concatenate([p.qd_start for p in parts]),
                     np.concatenate([p.effort for p in parts], 1))
 
@@ -411,24 +415,26 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
     covariance = bread @ (score.T @ score) * (W / max(W - 1, 1)) @ bread
 
     fits = {"window_s": config.window_s, "trial_rmse_q": float(np.sqrt(np.mean(r * r)))}
-    selected = "newton"
+    selected, traces = "newton", None
     if holdout is not None:
-        fits["holdout"] = {
-            name: _replay_rmse(holdout, joint, placement, prior, body, values, config)
-            for name, values in (("prior", body.prior_values(0.0)), ("least_squares", x_ls), ("newton", p))
-        }
+        replays = {name: _replay(holdout, joint, placement, prior, body, values, config)
+                   for name, values in (("prior", body.prior_values(0.0)), ("least_squares", x_ls), ("newton", p))}
+        fits["holdout"] = {name: replay[0] for name, replay in replays.items()}
         if fits["holdout"]["least_squares"]["rmse_q"] < fits["holdout"]["newton"]["rmse_q"]:
             selected, p, covariance = "least_squares", x_ls, cov_ls
+        _, q_prior, w = replays["prior"]
+        traces = {"t_s": w.t_s, "measured": w.q[1:], "prior": q_prior, "kept": replays[selected][1]}
     return JointedIdentification(body.names, p, covariance, least_squares, body.inertial(p), body.basis,
-                                 fits, tuple(history), selected)
+                                 fits, tuple(history), selected, traces)
 
 
-def _replay_rmse(recording, joint, placement, prior, body: _BodyMap, p, config: JointedConfig) -> dict:
-    """Windowed replay of `recording` from measured starts: RMSE of q and of the tracked frame's position."""
+def _replay(recording, joint, placement, prior, body: _BodyMap, p, config: JointedConfig):
+    """Windowed replay of `recording` from measured starts: (RMSE of q and of the tracked frame's position,
+    simulated q [S, W], the windows)."""
     w = joint_windows(recording, joint, config)
     q = _Rollout(w, 1, joint, placement, prior, config.friction_smoothing).run(
-        [body.inertial(p)], np.array([p[-1]]), np.zeros((1, w.q.shape[1])), np.zeros((1, w.q.shape[1])))[:, 0]
-    return q_and_position_rmse(joint, q[1:], w.q[1:])
+        [body.inertial(p)], np.array([p[-1]]), np.zeros((1, w.q.shape[1])), np.zeros((1, w.q.shape[1])))[1:, 0]
+    return q_and_position_rmse(joint, q, w.q[1:]), q, w
 
 
 def q_and_position_rmse(joint: JointFit, q_sim: np.ndarray, q_meas: np.ndarray) -> dict:

@@ -56,6 +56,15 @@ class JointFit:
     rms_position_m: float
     rms_rotation_rad: float
 
+    def tracked_position(self, q: np.ndarray) -> np.ndarray:
+        """The tracked frame's origin [m, world] at joint coordinates q, shape (..., 3)."""
+        q = np.asarray(q, dtype=float)
+        p_ref = np.asarray(self.tracked_at_zero.position)
+        if self.type == "prismatic":
+            return p_ref + q[..., None] * self.axis
+        R_q = Rotation.from_rotvec(np.outer(q.reshape(-1), self.axis))
+        return (self.origin + R_q.apply(p_ref - self.origin)).reshape(*q.shape, 3)
+
     def to_json(self) -> dict:
         return {
             "type": self.type, "axis": self.axis.tolist(), "axis_std_rad": self.axis_std_rad,

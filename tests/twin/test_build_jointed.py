@@ -41,7 +41,7 @@ def test_build_drawer_sample(tmp_path: Path):
     assert len(doc["provenance"]["validation"]) == 4
     replay = doc["provenance"]["heldout_replay"]
     assert replay["mujoco"]["rmse_position_m"] < 0.005 and replay["newton"]["rmse_position_m"] < 0.005
-    for key in ("urdf", "mjcf", "usd"):
+    for key in ("urdf", "mjcf", "usd", "report"):
         assert (out / doc["files"][key]).is_file()
     assert (out / "meshes" / "base.obj").is_file()
 
