@@ -575,10 +575,7 @@ def _read_newton_jointed(asset: Asset, path: Path, fmt: str) -> dict:
     from scipy.spatial.transform import Rotation
 
     builder = newton.ModelBuilder()
-    if fmt == "mjcf":
-        builder.add_mjcf(str(path))
-    else:
-        builder.add_urdf(str(path))
+    {"mjcf": builder.add_mjcf, "urdf": builder.add_urdf, "usd": builder.add_usd}[fmt](str(path))
     model = builder.finalize(device="cpu")
     labels = [str(label).split("/")[-1] for label in builder.body_label]
     if asset.name not in labels:
@@ -633,12 +630,13 @@ def _read_yourdfpy_jointed(asset: Asset, path: Path) -> dict:
 JOINTED_LOADERS = {
     "mjcf": (("mujoco", _read_mujoco_jointed), ("newton", lambda a, p: _read_newton_jointed(a, p, "mjcf"))),
     "urdf": (("yourdfpy", _read_yourdfpy_jointed), ("newton", lambda a, p: _read_newton_jointed(a, p, "urdf"))),
+    "usd": (("newton", lambda a, p: _read_newton_jointed(a, p, "usd")),),
 }
 """Loaders of a drawer's or door's files: each returns the part's body and its joint, world frame."""
 
 
 def validate_jointed_exports(asset: Asset, out_dir: Path, paths: Any, *, tolerance: float = DEFAULT_TOLERANCE) -> dict:
-    """Reload a jointed asset's MJCF and URDF with MuJoCo, Newton and yourdfpy; compare body and joint.
+    """Reload a jointed asset's MJCF, URDF and USD with MuJoCo, Newton and yourdfpy; compare body and joint.
 
     Body: mass, COM and inertia relative errors as for free bodies. Joint: the
     type, the axis direction [rad], the distance of the loader's joint point

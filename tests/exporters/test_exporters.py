@@ -178,7 +178,8 @@ def test_usd_colliders_are_convex_hulls_with_a_physics_material(asset: Asset, tm
 
 @pytest.mark.parametrize("joint_type", ["prismatic", "revolute"])
 def test_jointed_asset_reads_back_with_its_joint(asset: Asset, tmp_path: Path, joint_type: str):
-    """A drawer or door (tilted axis, turned placement, base mesh) reads back in MuJoCo, Newton and yourdfpy
+    """A drawer or door (tilted axis, turned placement, base mesh) reads back in MuJoCo, Newton (all three files)
+    and yourdfpy
     with the same body, joint type, axis, axis point, limits, damping and friction."""
     from pipelines.validate import validate_jointed_exports
 
@@ -188,7 +189,7 @@ def test_jointed_asset_reads_back_with_its_joint(asset: Asset, tmp_path: Path, j
     part = replace(asset, kind=joint_type, joint=joint, geometry=replace(asset.geometry, base="meshes/base.obj"))
     paths = export_all(part, tmp_path)
     readings = validate_jointed_exports(part, tmp_path, paths)
-    assert set(readings) == {"mujoco (mjcf)", "newton (mjcf)", "yourdfpy (urdf)", "newton (urdf)"}
+    assert set(readings) == {"mujoco (mjcf)", "newton (mjcf)", "yourdfpy (urdf)", "newton (urdf)", "newton (usd)"}
     for reading in readings.values():
         assert reading["friction"] == pytest.approx(FRICTION, rel=1e-6)
         assert reading["limits"] == pytest.approx([-0.05, 0.9], abs=1e-6)

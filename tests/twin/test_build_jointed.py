@@ -38,7 +38,7 @@ def test_build_drawer_sample(tmp_path: Path):
     assert 0 < joint["axis_std_rad"] < 0.01
     travel = doc["provenance"]["kind"]["joint"]["observed_travel"]  # of the trial; the held-out one counts too
     assert joint["lower"] < travel[0] and joint["upper"] > travel[1]
-    assert len(doc["provenance"]["validation"]) == 4
+    assert len(doc["provenance"]["validation"]) == 5
     replay = doc["provenance"]["heldout_replay"]
     assert replay["mujoco"]["rmse_position_m"] < 0.005 and replay["newton"]["rmse_position_m"] < 0.005
     for key in ("urdf", "mjcf", "usd", "report"):
