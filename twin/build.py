@@ -83,6 +83,8 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
         if not Path(path).is_file():
             raise BuildError(f"{path}: recording not found")
+    if config.base_mesh and not Path(config.base_mesh).is_file():
+        raise BuildError(f"{config.base_mesh}: base mesh not found")
 
     # Recordings are read first: they are quick, and a bad file should fail before minutes of geometry.
     trials = [timer.run(f"logs {p.name}", read_recording, p) for p in config.logs]
