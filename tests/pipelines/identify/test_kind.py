@@ -1,6 +1,5 @@
 """Kind of motion by BIC, and the joint's axis and point, on pose tracks with the tracker's noise."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
