@@ -9,6 +9,7 @@ from pathlib import Path
 from .model import Asset, Effect, Estimate, Fit, FitMetrics, Geometry, Joint, Material, Pose, Theta
 
 SCHEMA = "twin.asset/1"
+_THETA_FIELDS = ("mass", "com", "inertia", "friction")
 
 
 def asset_to_json(asset: Asset) -> dict:
@@ -27,9 +28,11 @@ def asset_to_json(asset: Asset) -> dict:
             "com": theta.com.to_json(),
             "inertia": theta.inertia.to_json(),
             "friction": theta.friction.to_json(),
+            **{name: e.to_json() for name, e in theta.determined},
         },
         "material": asdict(asset.material),
-        "geometry": {"visual": asset.geometry.visual, "collision": list(asset.geometry.collision)},
+        "geometry": {"visual": asset.geometry.visual, "collision": list(asset.geometry.collision),
+                     **({"base": asset.geometry.base} if asset.geometry.base else {})},
         "effects": [asdict(e) for e in asset.effects],
         "unexplained": list(asset.unexplained),
         "files": dict(asset.files),
@@ -51,8 +54,9 @@ def asset_from_json(doc: dict) -> Asset:
         name=doc["name"],
         kind=doc["kind"],
         placement=Pose(doc["placement"]["position"], doc["placement"]["quaternion_xyzw"]),
-        theta=Theta(*(Estimate.from_json(t[k]) for k in ("mass", "com", "inertia", "friction"))),
-        geometry=Geometry(doc["geometry"]["visual"], tuple(doc["geometry"]["collision"])),
+        theta=Theta(*(Estimate.from_json(t[k]) for k in _THETA_FIELDS),
+                    determined=tuple((k, Estimate.from_json(v)) for k, v in t.items() if k not in _THETA_FIELDS)),
+        geometry=Geometry(doc["geometry"]["visual"], tuple(doc["geometry"]["collision"]), doc["geometry"].get("base")),
         material=Material(**doc["material"]),
         joint=Joint(**doc["joint"]) if doc.get("joint") else None,
         effects=tuple(Effect(**e) for e in doc.get("effects", [])),

@@ -173,6 +173,9 @@ class Theta:
     com: Estimate
     inertia: Estimate
     friction: Estimate
+    determined: tuple[tuple[str, Estimate], ...] = ()
+    """Combinations a motion determines that are no theta field of their own (a door's
+    inertia about its joint axis, an oven door's gravity moment m*d), by name."""
 
     def inertial(self) -> Inertial:
         return Inertial(self.mass.value, self.com.value, self.inertia.value)
@@ -194,6 +197,8 @@ class Geometry:
 
     visual: str
     collision: tuple[str, ...]
+    base: str | None = None
+    """Jointed kinds: mesh of the fixed base, world frame (optional)."""
 
 
 @dataclass(frozen=True)
@@ -208,6 +213,10 @@ class Joint:
     damping: float = 0.0
     stiffness: float = 0.0
     spring_ref: float = 0.0
+    axis_std_rad: float | None = None
+    """1-sigma angle of the axis direction's error, when estimated from motion [rad]."""
+    origin_std_m: tuple[float, float, float] | None = None
+    """1-sigma error of `origin` per world axis across the axis (revolute) [m]."""
 
 
 @dataclass(frozen=True)

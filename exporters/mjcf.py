@@ -1,7 +1,9 @@
 """MJCF writer: the asset as a MuJoCo model file `NAME.xml`.
 
-The body frame is the object frame, placed at `asset.placement` on a free
-joint. Numbers are written with `repr` (shortest exact round trip) because
+The body frame is the object frame, placed at `asset.placement`: on a free
+joint, or for drawers and doors inside a fixed base body on `asset.joint`
+(q = 0 at the placement, passive damping, `frictionloss` for the joint's
+Coulomb friction, `range` for its limits). Numbers are written with `repr` (shortest exact round trip) because
 `MjSpec.to_xml` rounds to 6 significant digits.
 """
 
@@ -37,7 +39,7 @@ def _mesh_name(rel_path: str) -> str:
 
 
 def export_mjcf(asset: Asset, out_dir: Path) -> Path:
-    """Write `out_dir/NAME.xml` for a free (or sliding) rigid object.
+    """Write `out_dir/NAME.xml` for a rigid object, free or on a joint.
 
     Inertial: mass [kg], COM [m] and the full tensor about the COM [kg m^2],
     object frame. Collision: one mesh geom per convex part with sliding
@@ -46,12 +48,12 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
     `out_dir`.
 
     Raises:
-        ValueError: for kinds other than "free"/"sliding", an unphysical inertia
-            tensor, no collision parts or clashing mesh file stems.
+        ValueError: an unphysical inertia tensor, no collision parts, an empty joint
+            range or clashing mesh file stems.
     """
     out_dir = Path(out_dir)
     path = out_dir / f"{asset.name}.xml"
-    mesh_paths = [asset.geometry.visual, *asset.geometry.collision]
+    mesh_paths = [asset.geometry.visual, *asset.geometry.collision, *filter(None, [asset.geometry.base])]
     names = [_mesh_name(p) for p in mesh_paths]
     if len(set(names)) != len(names):
         raise ValueError(f"{path}: mesh file stems must be unique, got {names}")
@@ -60,7 +62,8 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
 
     inertial = exportable_inertial(asset, path, "export_mjcf")
     I = inertial.inertia_matrix()
-    mu = float(asset.theta.friction.value)
+    # a jointed part's theta.friction is its joint's; its surfaces keep the material's
+    mu = float(asset.theta.friction.value if asset.joint is None else asset.material.friction)
     x, y, z, w = asset.placement.quaternion_xyzw
 
     root = ET.Element("mujoco", model=asset.name)
@@ -71,9 +74,28 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
         ET.SubElement(assets_el, "mesh", name=name, file=os.path.relpath(rel, meshdir).replace(os.sep, "/"))
 
     world = ET.SubElement(root, "worldbody")
-    world.append(ET.Comment(" object frame at the scanned placement; no support plane for free objects "))
-    body = ET.SubElement(world, "body", name=asset.name, pos=_num(asset.placement.position), quat=_num((w, x, y, z)))
-    ET.SubElement(body, "freejoint", name=f"{asset.name}_free")
+    if asset.joint is None:
+        world.append(ET.Comment(" object frame at the scanned placement; no support plane for free objects "))
+        parent = world
+    else:
+        world.append(ET.Comment(" fixed base in world; the part at its scanned placement (q = 0) on its joint "))
+        parent = ET.SubElement(world, "body", name=f"{asset.name}_base")
+        if asset.geometry.base:
+            ET.SubElement(parent, "geom", name=names[-1], type="mesh", mesh=names[-1],
+                          friction=_num((mu, _TORSION_FRICTION, _ROLL_FRICTION)))
+    body = ET.SubElement(parent, "body", name=asset.name, pos=_num(asset.placement.position), quat=_num((w, x, y, z)))
+    if asset.joint is None:
+        ET.SubElement(body, "freejoint", name=f"{asset.name}_free")
+    else:
+        j = asset.joint
+        R = asset.placement.rotation_matrix()
+        ET.SubElement(
+            body, "joint", name=f"{asset.name}_joint", type="slide" if j.type == "prismatic" else "hinge",
+            pos=_num(R.T @ (np.asarray(j.origin) - asset.placement.position)), axis=_num(R.T @ np.asarray(j.axis)),
+            range=_num((j.lower, j.upper)), damping=repr(float(j.damping)),
+            frictionloss=repr(float(asset.theta.friction.value)), stiffness=repr(float(j.stiffness)),
+            springref=repr(float(j.spring_ref)),
+        )
     ET.SubElement(
         body,
         "inertial",
@@ -87,12 +109,15 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
         body, "geom", name=names[0], type="mesh", mesh=names[0],
         contype="0", conaffinity="0", density="0", group="2",
     )
-    for name in names[1:]:
+    for name in names[1:1 + len(asset.geometry.collision)]:
         ET.SubElement(
             body, "geom", name=name, type="mesh", mesh=name, group="3",
             friction=_num((mu, _TORSION_FRICTION, _ROLL_FRICTION)),
         )
 
+    if asset.joint is not None and asset.geometry.base:
+        # the joint guides the part through the base (a carcass around a drawer): they must not collide
+        ET.SubElement(ET.SubElement(root, "contact"), "exclude", body1=f"{asset.name}_base", body2=asset.name)
     ET.indent(root, space="  ")
     out_dir.mkdir(parents=True, exist_ok=True)
     path.write_text(ET.tostring(root, encoding="unicode") + "\n")

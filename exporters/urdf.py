@@ -1,8 +1,13 @@
-"""URDF writer: the asset as one link in `NAME.urdf`.
+"""URDF writer: the asset as one link in `NAME.urdf` (or a base link and the part on its joint).
 
 The link frame is the object frame. A lone floating link has no joint to
 carry `asset.placement`, so the link sits at the origin and the placement is
-recorded in a comment (and in asset.json). Numbers are written with `repr`
+recorded in a comment (and in asset.json). A drawer or door is a fixed base
+link in world and the part on a prismatic or revolute joint placed at the
+scan (q = 0); URDF turns a revolute child about its own frame's origin, so
+there the part's link frame is the object frame moved onto the axis (the
+point nearest the placement) and the part's inertial and meshes carry the
+offset. Numbers are written with `repr`
 (shortest exact round trip).
 """
 
@@ -26,15 +31,15 @@ def _num(values) -> str:
     return " ".join(repr(float(v)) for v in np.ravel(values))
 
 
-def _mesh_element(parent: ET.Element, tag: str, name: str, filename: str) -> None:
+def _mesh_element(parent: ET.Element, tag: str, name: str, filename: str, offset=(0.0, 0.0, 0.0)) -> None:
     el = ET.SubElement(parent, tag, name=name)
-    ET.SubElement(el, "origin", xyz="0 0 0", rpy="0 0 0")
+    ET.SubElement(el, "origin", xyz=_num(offset), rpy="0 0 0")
     geometry = ET.SubElement(el, "geometry")
     ET.SubElement(geometry, "mesh", filename=filename)
 
 
 def export_urdf(asset: Asset, out_dir: Path) -> Path:
-    """Write `out_dir/NAME.urdf` for a free (or sliding) rigid object.
+    """Write `out_dir/NAME.urdf` for a rigid object, free or on a joint.
 
     One link NAME: `<inertial>` with the COM [m] as origin (rpy 0), mass [kg]
     and the full tensor about the COM [kg m^2], object-frame axes; the visual
@@ -44,28 +49,32 @@ def export_urdf(asset: Asset, out_dir: Path) -> Path:
     URDF file (MuJoCo cannot open `package://`).
 
     Raises:
-        ValueError: for kinds other than "free"/"sliding", an unphysical inertia
-            tensor or no collision parts.
+        ValueError: an unphysical inertia tensor, no collision parts or an empty joint range.
     """
     out_dir = Path(out_dir)
     path = out_dir / f"{asset.name}.urdf"
 
     inertial = exportable_inertial(asset, path, "export_urdf")
     I = inertial.inertia_matrix()
-    mu = repr(float(asset.theta.friction.value))
+    # a jointed part's theta.friction is its joint's; its surfaces keep the material's
+    mu = repr(float(asset.theta.friction.value if asset.joint is None else asset.material.friction))
     p, q = asset.placement.position, asset.placement.quaternion_xyzw
 
     robot = ET.Element("robot", name=asset.name)
-    robot.append(
-        ET.Comment(
-            " A single floating link cannot carry a placement in URDF: the link frame is the object frame"
-            f" at the origin. Scanned placement in world: position {_num(p)} m,"
-            f" quaternion_xyzw {_num(q)} (also in asset.json). "
+    offset = np.zeros(3)
+    if asset.joint is None:
+        robot.append(
+            ET.Comment(
+                " A single floating link cannot carry a placement in URDF: the link frame is the object frame"
+                f" at the origin. Scanned placement in world: position {_num(p)} m,"
+                f" quaternion_xyzw {_num(q)} (also in asset.json). "
+            )
         )
-    )
+    else:
+        offset = _write_base_and_joint(robot, asset)
     link = ET.SubElement(robot, "link", name=asset.name)
     inertial_el = ET.SubElement(link, "inertial")
-    ET.SubElement(inertial_el, "origin", xyz=_num(inertial.com), rpy="0 0 0")
+    ET.SubElement(inertial_el, "origin", xyz=_num(np.asarray(inertial.com) + offset), rpy="0 0 0")
     ET.SubElement(inertial_el, "mass", value=repr(inertial.mass))
     ET.SubElement(
         inertial_el, "inertia",
@@ -73,9 +82,9 @@ def export_urdf(asset: Asset, out_dir: Path) -> Path:
         iyy=_num(I[1, 1]), iyz=_num(I[1, 2]), izz=_num(I[2, 2]),
     )  # fmt: skip
     visual = asset.geometry.visual
-    _mesh_element(link, "visual", PurePosixPath(visual).stem, PurePosixPath(visual).as_posix())
+    _mesh_element(link, "visual", PurePosixPath(visual).stem, PurePosixPath(visual).as_posix(), offset)
     for rel in asset.geometry.collision:
-        _mesh_element(link, "collision", PurePosixPath(rel).stem, PurePosixPath(rel).as_posix())
+        _mesh_element(link, "collision", PurePosixPath(rel).stem, PurePosixPath(rel).as_posix(), offset)
     contact = ET.SubElement(link, "contact")
     ET.SubElement(contact, "lateral_friction", value=mu)
 
@@ -87,3 +96,39 @@ def export_urdf(asset: Asset, out_dir: Path) -> Path:
     out_dir.mkdir(parents=True, exist_ok=True)
     path.write_text('<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n")
     return path
+
+
+def urdf_link_offset(asset: Asset) -> np.ndarray:
+    """Object-frame origin in the part's URDF link frame [m]: zero unless revolute (see the module docstring)."""
+    j = asset.joint
+    if j is None or j.type != "revolute":
+        return np.zeros(3)
+    p = np.asarray(asset.placement.position)
+    a, o = np.asarray(j.axis), np.asarray(j.origin)
+    on_axis = o + a * (a @ (p - o))
+    return asset.placement.rotation_matrix().T @ (p - on_axis)
+
+
+def _write_base_and_joint(robot: ET.Element, asset: Asset) -> np.ndarray:
+    """The fixed base link and the joint to the part; returns the object-frame origin in the part's link frame."""
+    from scipy.spatial.transform import Rotation
+
+    j = asset.joint
+    base = ET.SubElement(robot, "link", name=f"{asset.name}_base")
+    if asset.geometry.base:
+        stem, rel = PurePosixPath(asset.geometry.base).stem, PurePosixPath(asset.geometry.base).as_posix()
+        _mesh_element(base, "visual", stem, rel)
+        _mesh_element(base, "collision", stem, rel)
+    R = asset.placement.rotation_matrix()
+    offset = urdf_link_offset(asset)
+    joint = ET.SubElement(robot, "joint", name=f"{asset.name}_joint", type=j.type)
+    ET.SubElement(joint, "parent", link=f"{asset.name}_base")
+    ET.SubElement(joint, "child", link=asset.name)
+    ET.SubElement(joint, "origin", xyz=_num(np.asarray(asset.placement.position) - R @ offset),
+                  rpy=_num(Rotation.from_matrix(R).as_euler("xyz")))
+    ET.SubElement(joint, "axis", xyz=_num(R.T @ np.asarray(j.axis)))
+    # effort and velocity bounds are the robot's business, not the part's: generous values
+    ET.SubElement(joint, "limit", lower=repr(float(j.lower)), upper=repr(float(j.upper)), effort="1000.0",
+                  velocity="100.0")
+    ET.SubElement(joint, "dynamics", damping=repr(float(j.damping)), friction=repr(float(asset.theta.friction.value)))
+    return offset

@@ -70,7 +70,7 @@ def _std_or_none(estimate) -> np.ndarray | None:
 
 
 def export_usd(asset: Asset, out_dir: Path) -> Path:
-    """Write `out_dir/NAME.usda` for a free (or sliding) rigid object.
+    """Write `out_dir/NAME.usda` for a rigid object, free or on a joint to the world.
 
     The body prim's frame is the object frame, placed at `asset.placement`.
     Mass [kg], COM [m] and inertia about the COM [kg m^2] (object-frame axes)
@@ -79,8 +79,8 @@ def export_usd(asset: Asset, out_dir: Path) -> Path:
     the physics material's static and dynamic friction (unitless).
 
     Raises:
-        ValueError: for kinds other than "free"/"sliding", an unphysical inertia
-            tensor, no collision parts or unreadable mesh files.
+        ValueError: an unphysical inertia tensor, no collision parts, an empty joint
+            range or unreadable mesh files. A base mesh is not written to USD.
     """
     from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 
@@ -138,7 +138,8 @@ def export_usd(asset: Asset, out_dir: Path) -> Path:
 
     material = UsdShade.Material.Define(stage, root_path.AppendChild("PhysicsMaterial"))
     physics_material = UsdPhysics.MaterialAPI.Apply(material.GetPrim())
-    mu = float(asset.theta.friction.value)
+    # a jointed part's theta.friction is its joint's; its surfaces keep the material's
+    mu = float(asset.theta.friction.value if asset.joint is None else asset.material.friction)
     physics_material.CreateStaticFrictionAttr(mu)
     physics_material.CreateDynamicFrictionAttr(mu)
     physics_material.CreateRestitutionAttr(float(asset.material.restitution))
@@ -158,5 +159,44 @@ def export_usd(asset: Asset, out_dir: Path) -> Path:
             material, UsdShade.Tokens.weakerThanDescendants, "physics"
         )
 
+    if asset.joint is not None:
+        _define_joint(stage, root_path, asset)
     stage.GetRootLayer().Save()
     return path
+
+
+def _define_joint(stage, body_path, asset: Asset) -> None:
+    """The part's joint to the world (the fixed base), q = 0 at the placement.
+
+    UsdPhysics joints turn about a named local axis: X, rotated onto
+    `asset.joint.axis` by the local frames. Revolute limits are in degrees.
+    Passive friction and damping have no core attribute: Newton's and MuJoCo's
+    own (`newton:damping` per degree on revolute joints, as Newton reads it).
+    """
+    from pxr import Gf, Sdf, UsdPhysics
+    from scipy.spatial.transform import Rotation
+
+    j = asset.joint
+    a = np.asarray(j.axis, dtype=float)
+    R_joint = Rotation.align_vectors([a], [[1.0, 0.0, 0.0]])[0]
+    R_body = Rotation.from_quat(asset.placement.quaternion_xyzw)
+    revolute = j.type == "revolute"
+    joint = (UsdPhysics.RevoluteJoint if revolute else UsdPhysics.PrismaticJoint).Define(
+        stage, body_path.AppendChild("joint"))
+    joint.CreateBody1Rel().SetTargets([body_path])
+    joint.CreateAxisAttr("X")
+    quat = lambda r: Gf.Quatf(*(lambda x, y, z, w: (w, x, y, z))(*r.as_quat()))  # noqa: E731
+    joint.CreateLocalPos0Attr(Gf.Vec3f(*j.origin))
+    joint.CreateLocalRot0Attr(quat(R_joint))
+    joint.CreateLocalPos1Attr(Gf.Vec3f(*R_body.inv().apply(np.asarray(j.origin) - asset.placement.position)))
+    joint.CreateLocalRot1Attr(quat(R_body.inv() * R_joint))
+    to_unit = np.degrees if revolute else float
+    joint.CreateLowerLimitAttr(float(to_unit(j.lower)))
+    joint.CreateUpperLimitAttr(float(to_unit(j.upper)))
+    prim = joint.GetPrim()
+    friction = float(asset.theta.friction.value)
+    prim.CreateAttribute("newton:damping", Sdf.ValueTypeNames.Float).Set(
+        float(j.damping * (np.pi / 180 if revolute else 1.0)))
+    prim.CreateAttribute("newton:friction", Sdf.ValueTypeNames.Float).Set(friction)
+    prim.CreateAttribute("mjc:frictionloss", Sdf.ValueTypeNames.Float).Set(friction)
+    UsdPhysics.ArticulationRootAPI.Apply(stage.GetPrimAtPath(body_path))

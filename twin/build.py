@@ -41,6 +41,8 @@ class BuildConfig:
     cache_dir: Path = Path.home() / ".cache" / "twin"
     vlm: str | None = None
     vlm_model: str | None = None
+    kind: Literal["free", "sliding", "prismatic", "revolute"] | None = None
+    base_mesh: Path | None = None
 
 
 @dataclass
@@ -81,10 +83,16 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
         if not Path(path).is_file():
             raise BuildError(f"{path}: recording not found")
+    if config.base_mesh and not Path(config.base_mesh).is_file():
+        raise BuildError(f"{config.base_mesh}: base mesh not found")
 
     # Recordings are read first: they are quick, and a bad file should fail before minutes of geometry.
     trials = [timer.run(f"logs {p.name}", read_recording, p) for p in config.logs]
     holdout = timer.run(f"logs {config.holdout.name}", read_recording, config.holdout) if config.holdout else None
+    from pipelines.identify.kind import detect_kind
+
+    detection = timer.run("kind", detect_kind, trials[0], config.kind)
+    log(f"motion: {detection.kind}" + (" (--kind)" if detection.forced else f" (BIC {detection.bic})"))
     mesh_world, name, hint, scan_stats = timer.run("scan + reconstruct", _object_mesh, config)
     name = config.name or name
     placement = Pose(tuple(mesh_world.center_mass), (0.0, 0.0, 0.0, 1.0))
@@ -103,6 +111,11 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             "VLM: no usable answer; using the offline prior")
     prior = timer.run("priors", estimate_prior, mesh_object, material_range(named) if named else None, guess)
     material = prior.material
+    if detection.joint is not None:
+        from twin.jointed import build_jointed
+
+        return build_jointed(config, trials, holdout, detection, mesh_object, placement, parts, prior, name,
+                             scan_stats, timer, log, t_start)
 
     X_tracked_body = tracked_to_object(trials[0], placement)
     id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations,

@@ -40,14 +40,20 @@ class Build:
     Any failure falls back to the offline prior."""
     vlm_model: str | None = None
     """Model name on the --vlm server (an image-capable one)."""
+    kind: Literal["free", "sliding", "prismatic", "revolute"] | None = None
+    """Kind of interaction; default: chosen from the first recording's motion by BIC."""
+    base_mesh: Path | None = None
+    """Drawers and doors: mesh of the fixed base (world frame, metres), written with the part."""
 
 
 @dataclass(frozen=True)
 class Synth:
-    """Make a sample with known truth: an RGB-D scan and two recordings of a held object."""
+    """Make a sample with known truth: an RGB-D scan and two recordings of a held object or a jointed part."""
 
     output: Annotated[Path, tyro.conf.arg(aliases=("-o",))] = Path("samples/cube")
     """Directory to write (scan/, trial.mcap, heldout.mcap, truth.json)."""
+    object: Literal["drawer", "cabinet_door", "oven_door"] | None = None
+    """A part on a joint (RigPI's drawer, cabinet door, oven door analogues) instead of a held --shape."""
     shape: Literal["cube", "sphere"] = "cube"
     size_m: float = 0.04
     """Cube edge or sphere diameter [m]."""
@@ -61,7 +67,7 @@ class Bench:
     """Benchmarks that print a table.
 
     sample: cold and warm builds of a synthetic sample against its truth.
-    paper: RigPI's cube, sphere and apple, held and moved, several noise draws each.
+    paper: RigPI's cube, sphere and apple, held and moved, then its drawer, cabinet door and oven door; several noise draws each.
     priors: RigPI's six objects: prior error (library, the paper's VLM answers, fusion) and whether C holds the truth.
     throughput: time per identification iteration for 1 and many objects batched, on --device.
     crlb: spread of the estimates over --draws noise draws against the Cramer-Rao bound.
@@ -87,6 +93,8 @@ class Bench:
     """Objects batched per run (throughput)."""
     quick: bool = False
     """A subset that runs in about a minute (reconstruct)."""
+    jointed_only: bool = False
+    """paper: only the drawer, cabinet door and oven door."""
 
 
 def _log(message: str) -> None:
@@ -101,7 +109,7 @@ def _run_build(args: Build) -> None:
             source=args.source, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
             name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
             optimizer=args.optimizer,
-            vlm=args.vlm, vlm_model=args.vlm_model,
+            vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind, base_mesh=args.base_mesh,
         ),
         log=_log,
     )
@@ -109,6 +117,14 @@ def _run_build(args: Build) -> None:
 
 def _run_synth(args: Synth) -> None:
     import trimesh
+
+    if args.object is not None:
+        from pipelines.synth.sample import JointedSampleConfig, make_jointed_sample
+
+        _log(f"synthesising {args.object} into {args.output}")
+        make_jointed_sample(args.output, JointedSampleConfig(object=args.object, seed=args.seed))
+        _log(f"wrote {args.output}")
+        return
 
     from pipelines.synth.sample import HeldSampleConfig, make_held_sample
 
@@ -159,6 +175,10 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.priors import bench_priors
 
                 bench_priors()
+            elif command.jointed_only:
+                from twin.bench.paper_jointed import bench_paper_jointed
+
+                bench_paper_jointed(command.seeds)
             else:
                 from twin.bench.paper import bench_paper
 

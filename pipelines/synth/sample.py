@@ -104,3 +104,47 @@ def _jsonable(x):
     if isinstance(x, (list, tuple)):
         return [_jsonable(v) for v in x]
     return x
+
+
+@dataclass(frozen=True)
+class JointedSampleConfig:
+    """What `twin synth --object drawer|cabinet_door|oven_door` makes: the part scanned at q = 0, worked twice."""
+
+    object: str = "drawer"
+    motion_duration_s: float = 8.0
+    noise: SensorNoise = field(default_factory=SensorNoise)
+    render: RenderConfig = field(default_factory=RenderConfig)
+    seed: int = 0
+
+
+def make_jointed_sample(out_dir: Path, config: JointedSampleConfig = JointedSampleConfig()) -> Path:
+    """Write out_dir/{scan/, part.obj, trial.mcap, heldout.mcap, truth.json} for one of RigPI's jointed objects."""
+    from .jointed import JointedMotionConfig, jointed_paper_objects, simulate_jointed, write_jointed_recording
+
+    objects = jointed_paper_objects()
+    if config.object not in objects:
+        raise ValueError(f"unknown jointed object {config.object!r}; choose one of {', '.join(objects)}")
+    obj = objects[config.object]
+    rng = np.random.default_rng(config.seed)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    mesh_world = obj.mesh()
+    mesh_world.apply_translation(obj.position_m)
+    render_scan(mesh_world, out_dir / "scan", config.render, rng, name=obj.name, material_hint=None)
+    mesh_world.export(out_dir / "part.obj")
+    recordings = {}
+    for name in ("trial", "heldout"):
+        motion = simulate_jointed(obj, JointedMotionConfig(duration_s=config.motion_duration_s), rng)
+        recordings[name] = write_jointed_recording(out_dir / f"{name}.mcap", obj, motion, config.noise, rng).name
+    truth = obj.inertial()
+    doc = {
+        "name": obj.name, "kind": obj.joint_type,
+        "frame": "object frame: origin at the part's COM at q = 0, world axes",
+        "mass": obj.mass_kg, "com_world": list(obj.position_m), "inertia": truth.inertia_matrix().tolist(),
+        "joint": {"type": obj.joint_type, "axis": list(obj.axis), "origin": list(obj.origin_m),
+                  "friction": obj.friction, "travel": list(obj.travel)},
+        "recordings": recordings,
+        "config": _jsonable(asdict(config)),
+    }
+    (out_dir / "truth.json").write_text(json.dumps(doc, indent=2) + "\n")
+    return out_dir

@@ -176,12 +176,38 @@ def test_usd_colliders_are_convex_hulls_with_a_physics_material(asset: Asset, tm
     assert not visual.GetPrim().HasAPI(UsdPhysics.CollisionAPI)
 
 
-def test_jointed_kind_is_refused_with_a_clear_error(asset: Asset, tmp_path: Path):
-    """Prismatic and revolute assets are not exported yet: each writer raises ValueError naming the kind."""
-    joint = Joint("prismatic", (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.3)
-    drawer = replace(asset, kind="prismatic", joint=joint)
+@pytest.mark.parametrize("joint_type", ["prismatic", "revolute"])
+def test_jointed_asset_reads_back_with_its_joint(asset: Asset, tmp_path: Path, joint_type: str):
+    """A drawer or door (tilted axis, turned placement, base mesh) reads back in MuJoCo, Newton (all three files)
+    and yourdfpy
+    with the same body, joint type, axis, axis point, limits, damping and friction."""
+    from pipelines.validate import validate_jointed_exports
+
+    trimesh.creation.box(extents=(0.5, 0.5, 0.02)).export(tmp_path / "meshes" / "base.obj")
+    axis = np.array([0.2, -0.3, 0.93])
+    joint = Joint(joint_type, tuple(axis / np.linalg.norm(axis)), (0.35, -0.12, 0.02), -0.05, 0.9, damping=0.03)
+    part = replace(asset, kind=joint_type, joint=joint, geometry=replace(asset.geometry, base="meshes/base.obj"))
+    paths = export_all(part, tmp_path)
+    readings = validate_jointed_exports(part, tmp_path, paths)
+    assert set(readings) == {"mujoco (mjcf)", "newton (mjcf)", "yourdfpy (urdf)", "newton (urdf)", "newton (usd)"}
+    for reading in readings.values():
+        assert reading["friction"] == pytest.approx(FRICTION, rel=1e-6)
+        assert reading["limits"] == pytest.approx([-0.05, 0.9], abs=1e-6)
+
+    from pxr import Usd, UsdPhysics
+
+    stage = Usd.Stage.Open(str(paths.usd))
+    usd_joint = stage.GetPrimAtPath("/box/joint")
+    assert usd_joint.IsA(UsdPhysics.RevoluteJoint if joint_type == "revolute" else UsdPhysics.PrismaticJoint)
+    upper = UsdPhysics.Joint(usd_joint).GetPrim().GetAttribute("physics:upperLimit").Get()
+    assert upper == pytest.approx(np.degrees(0.9) if joint_type == "revolute" else 0.9, rel=1e-6)
+
+
+def test_empty_joint_range_is_refused(asset: Asset, tmp_path: Path):
+    """A joint whose lower limit is not below its upper one is refused by every writer, naming the range."""
+    drawer = replace(asset, kind="prismatic", joint=Joint("prismatic", (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3, 0.3))
     for export in (export_urdf, export_mjcf, export_usd):
-        with pytest.raises(ValueError, match="prismatic"):
+        with pytest.raises(ValueError, match="range"):
             export(drawer, tmp_path)
 
 

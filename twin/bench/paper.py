@@ -1,4 +1,5 @@
-"""`twin bench paper`: RigPI's free objects (cube, sphere, apple), held and moved, several noise draws each."""
+"""`twin bench paper`: RigPI's free objects (cube, sphere, apple), held and moved, several noise draws each;
+then its jointed ones (twin/bench/paper_jointed.py)."""
 
 from __future__ import annotations
 
@@ -118,7 +119,9 @@ def bench_paper(seeds: int = 5, duration_s: float = 10.0, paper_optimizer: bool 
     rows = [{"object": name, "estimator": estimator, **_spread(values, truths[name])}
             for (name, estimator), values in estimates.items()]
     _print_paper_table(rows)
-    return rows
+    from twin.bench.paper_jointed import bench_paper_jointed
+
+    return rows + bench_paper_jointed(seeds)
 
 
 def _spread(estimates, truth) -> dict:

@@ -1,0 +1,449 @@
+"""Physics of a part on one joint (drawer, door) from the handle wrench and the joint's motion.
+
+A one-joint motion determines only what enters its equation of motion,
+
+    M q'' = tau(t) + Q_g(q) - f_c tanh(q' / eps),
+
+with tau the measured wrench projected on the joint:
+
+- prismatic: M = m (the mass), Q_g = m g.a;
+- revolute: M = I_a (inertia about the joint axis), Q_g = a.(m d(q) x g), where
+  m d is the part's first moment about the axis (seen only when the axis is
+  not vertical: an oven door's gravity moment, not a cabinet door's);
+- the joint's Coulomb friction f_c in both.
+
+Those are identified; the rest of the body (mass of a door, inertia about
+other axes, COM along the axis) comes from the prior and is reported as prior.
+Least squares on the equation of motion (smoothed q, q', q'') gives the start;
+then shooting windows simulated as parallel Newton worlds with Featherstone
+(gravity, the body's full inertial parameters, friction through `joint_f`)
+are fitted to the measured q by Levenberg-Marquardt, each window's start
+state (q, q') refined with it. The Jacobian comes from central differences
+over extra worlds: every perturbed parameter set is one more copy of the
+windows in the same model. The covariance is a window-clustered sandwich.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+from scipy.spatial.transform import Rotation
+
+from assets import Inertial, Pose
+
+from .kind import JointFit, joint_coordinates
+from .windows import lowpass
+
+__all__ = ["JointedConfig", "JointedIdentification", "identify_jointed", "joint_effort"]
+
+GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
+
+
+@dataclass(frozen=True)
+class JointedConfig:
+    """Settings of the jointed identification."""
+
+    window_s: float = 0.3
+    """Shooting-window length [s]."""
+    substeps: int = 5
+    """Featherstone steps per pose sample."""
+    friction_smoothing: float = 0.01
+    """eps of the joint friction model -f_c tanh(qd / eps) [m/s] or [rad/s]."""
+    gravity_min_tilt_rad: float = 0.17
+    """The gravity moment m d is identified only when the joint axis is tilted at least this much from vertical."""
+    max_iterations: int = 12
+    smoothing_hz: float = 8.0
+    """Low-pass of q for start states and the least-squares start [Hz]."""
+    hold_speed: float = 1e-3
+    """Windows start once the joint has moved: |q'| above this [m/s] or [rad/s] somewhere before."""
+
+
+@dataclass(frozen=True)
+class JointedIdentification:
+    """What the joint's motion determined, with covariance, and the body assembled from it and the prior.
+
+    names/values/covariance: identified parameters, in SI: "mass" [kg]
+    (prismatic), "axis_inertia" [kg m^2] (revolute), "gravity_moment_e1",
+    "gravity_moment_e2" [kg m] (revolute, tilted axis: m d in the plane
+    normal to the axis along `basis`), "friction" [N or N m].
+    least_squares: the same names from the start fit. inertial: the body in the
+    object frame (prior where not determined). basis: two unit world vectors
+    normal to the axis. fits: windowed replay RMSE of q and of the tracked frame's
+    position on the held-out recording at the prior and at each estimate.
+    """
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    covariance: np.ndarray
+    least_squares: dict
+    inertial: Inertial
+    basis: np.ndarray
+    fits: dict = field(default_factory=dict)
+    loss_history: tuple[float, ...] = ()
+    selected: str = "newton"
+    """"newton" or "least_squares": the one that predicts the held-out recording better (newton without one)."""
+    traces: dict | None = None
+    """Held-out replay: "t_s", "measured", "prior", "kept" q [m or rad], each [S, W] (None without a held-out)."""
+
+    def value(self, name: str) -> float:
+        return float(self.values[self.names.index(name)])
+
+    def std(self, name: str) -> float:
+        i = self.names.index(name)
+        return float(np.sqrt(max(self.covariance[i, i], 0.0)))
+
+    def provenance(self) -> dict:
+        return {
+            "identified": {n: {"value": self.value(n), "std": self.std(n)} for n in self.names},
+            "least_squares": self.least_squares,
+            "fits": self.fits,
+            "selected": self.selected,
+            "loss_history": list(self.loss_history),
+        }
+
+
+def joint_effort(recording, joint: JointFit) -> tuple[np.ndarray, np.ndarray]:
+    """(t_s, tau): the applied wrench projected on the joint [N or N m], at the wrench stamps.
+
+    Prismatic: F.a. Revolute: a.(r x F + T) with r from the axis point to the
+    tracked frame (where `Recording.wrench` takes its torque).
+    """
+    w = recording.wrench
+    if joint.type == "prismatic":
+        return w.t_s, w.force @ joint.axis
+    p, _ = recording.pose.interpolate(w.t_s)
+    return w.t_s, (np.cross(p - joint.origin, w.force) + w.torque) @ joint.axis
+
+
+@dataclass(frozen=True)
+class _Windows:
+    dt_s: float
+    substeps: int
+    q: np.ndarray          # [S+1, W] measured q at samples
+    t_s: np.ndarray        # [S, W] times of samples 1..S
+    q_start: np.ndarray    # [W] smoothed
+    qd_start: np.ndarray   # [W]
+    effort: np.ndarray     # [steps, W] zero-order hold
+
+
+def joint_windows(recording, joint: JointFit, config: JointedConfig) -> _Windows:
+    """Back-to-back windows of motion: measured q at the pose rate on a uniform grid, smoothed start
+    states, and the joint effort held over each Featherstone step."""
+    t = recording.pose.t_s
+    q = joint_coordinates(joint, recording.pose)
+    period = float(np.median(np.diff(t)))
+    grid = np.arange(t[0], t[-1], period)
+    qg = np.interp(grid, t, q)
+    qs = lowpass(qg, config.smoothing_hz, 1.0 / period)
+    qds = np.gradient(qs, period)
+    samples = int(round(config.window_s / period))
+    moving = np.flatnonzero(np.abs(qds) > config.hold_speed)
+    if len(moving) == 0:
+        raise ValueError(f"{recording.path}: the joint never moves (|dq/dt| below {config.hold_speed})")
+    t_wrench, tau = joint_effort(recording, joint)
+    first = max(moving[0], int(np.searchsorted(grid, t_wrench[0])) + 1, 10)
+    last = min(len(grid) - 10, int(np.searchsorted(grid, t_wrench[-1])) - 1)
+    starts = np.arange(first, last - samples, samples)
+    if len(starts) == 0:
+        raise ValueError(f"{recording.path}: too short for one {config.window_s} s window of motion")
+    dt = period / config.substeps
+    steps = samples * config.substeps
+    t_step = grid[starts][None, :] + dt * np.arange(steps)[:, None]
+    idx = np.clip(np.searchsorted(t_wrench, t_step + 1e-9, side="right") - 1, 0, len(t_wrench) - 1)
+    sample_idx = starts[None, :] + np.arange(samples + 1)[:, None]
+    return _Windows(dt, config.substeps, qg[sample_idx], grid[sample_idx[1:]], qs[starts], qds[starts], tau[idx])
+
+
+def _concat(parts: list[_Windows]) -> _Windows:
+    return _Windows(parts[0].dt_s, parts[0].substeps, np.concatenate([p.q for p in parts], 1),
+                    np.concatenate([p.t_s for p in parts], 1),
+                    np.concatenate([p.q_start for p in parts]), np.concatenate([p.qd_start for p in parts]),
+                    np.concatenate([p.effort for p in parts], 1))
+
+
+@wp.kernel
+def apply_window_effort_and_friction(
+    effort: wp.array2d[float],
+    step: int,
+    window_count: int,
+    friction: wp.array[float],
+    smoothing: float,
+    joint_qd: wp.array[float],
+    joint_f: wp.array[float],
+):
+    """Generalized force [N or N m] of world w: its window's measured effort minus f_c tanh(qd / eps)."""
+    w = wp.tid()
+    joint_f[w] = effort[step, w % window_count] - friction[w] * wp.tanh(joint_qd[w] / smoothing)
+
+
+class _Rollout:
+    """V parameter variants x W windows, each a one-joint articulation in one Featherstone model."""
+
+    def __init__(self, windows: _Windows, variants: int, joint: JointFit, placement: Pose, prior: Inertial,
+                 smoothing: float, device: str = "cpu"):
+        import newton
+
+        from pipelines.synth.jointed import add_jointed_part
+
+        self.windows, self.V, self.device, self.smoothing = windows, variants, device, smoothing
+        W = windows.q.shape[1]
+        builder = newton.ModelBuilder(gravity=tuple(GRAVITY_M_S2))
+        for _ in range(variants * W):
+            add_jointed_part(builder, joint.type, joint.axis, joint.origin, placement, prior)
+        self.model = builder.finalize(device=device)
+        self.solver = newton.solvers.SolverFeatherstone(self.model, angular_damping=0.0)
+        self.states = [self.model.state(), self.model.state()]
+        self.control = self.model.control()
+        self.effort = wp.array(windows.effort.astype(np.float32), dtype=float, device=device)
+        self.friction = wp.zeros(variants * W, dtype=float, device=device)
+
+    def run(self, inertials: list[Inertial], friction: np.ndarray, dq0: np.ndarray, dqd0: np.ndarray) -> np.ndarray:
+        """q [S+1, V, W] of every window for each variant's body, friction [V] and start offsets [V, W]."""
+        import newton
+
+        w = self.windows
+        W = w.q.shape[1]
+        model = self.model
+        mass = np.repeat([i.mass for i in inertials], W)
+        com = np.repeat([i.com for i in inertials], W, axis=0)
+        inertia = np.repeat([i.inertia_matrix() for i in inertials], W, axis=0)
+        model.body_mass.assign(mass.astype(np.float32))
+        model.body_inv_mass.assign((1.0 / mass).astype(np.float32))
+        model.body_com.assign(com.astype(np.float32))
+        model.body_inertia.assign(inertia.astype(np.float32))
+        model.body_inv_inertia.assign(np.linalg.inv(inertia).astype(np.float32))
+        self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
+        self.friction.assign(np.repeat(friction, W).astype(np.float32))
+        s0, s1 = self.states
+        s0.joint_q.assign((w.q_start[None, :] + dq0).reshape(-1).astype(np.float32))
+        s0.joint_qd.assign((w.qd_start[None, :] + dqd0).reshape(-1).astype(np.float32))
+        newton.eval_fk(model, s0.joint_q, s0.joint_qd, s0)
+        S = w.q.shape[0] - 1
+        out = np.zeros((S + 1, self.V * W))
+        out[0] = s0.joint_q.numpy()
+        for step in range(S * w.substeps):
+            wp.launch(apply_window_effort_and_friction, dim=self.V * W,
+                      inputs=[self.effort, step, W, self.friction, self.smoothing, s0.joint_qd],
+                      outputs=[self.control.joint_f], device=self.device)
+            self.solver.step(s0, s1, self.control, None, w.dt_s)
+            s0, s1 = s1, s0
+            if (step + 1) % w.substeps == 0:
+                out[(step + 1) // w.substeps] = s0.joint_q.numpy()
+        self.states = [s0, s1]
+        return out.reshape(S + 1, self.V, W)
+
+
+class _BodyMap:
+    """Identified parameters -> the body in the object frame, the rest from the prior."""
+
+    def __init__(self, joint: JointFit, placement: Pose, prior: Inertial, gravity: bool):
+        self.joint, self.placement, self.prior = joint, placement, prior
+        a = joint.axis
+        self.R = placement.rotation_matrix()
+        com_world = np.asarray(placement.position) + self.R @ np.asarray(prior.com)
+        r = com_world - joint.origin
+        self.along = a * (a @ r)
+        e1 = r - self.along
+        if np.linalg.norm(e1) < 1e-6:
+            e1 = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        self.basis = np.stack([e1, np.cross(a, e1)])
+        self.prior_md = prior.mass * (self.basis @ r)
+        self.I0_world = self.R @ prior.inertia_matrix() @ self.R.T
+        if joint.type == "prismatic":
+            self.names = ("mass", "friction")
+        elif gravity:
+            self.names = ("axis_inertia", "gravity_moment_e1", "gravity_moment_e2", "friction")
+        else:
+            self.names = ("axis_inertia", "friction")
+
+    def prior_values(self, friction0: float) -> np.ndarray:
+        if self.joint.type == "prismatic":
+            return np.array([self.prior.mass, friction0])
+        a = self.joint.axis
+        d = self.prior_md / self.prior.mass
+        I_a = a @ self.I0_world @ a + self.prior.mass * d @ d
+        return np.array([I_a, *(self.prior_md if len(self.names) == 4 else ()), friction0])
+
+    def inertial(self, p: np.ndarray) -> Inertial:
+        prior, a = self.prior, self.joint.axis
+        if self.joint.type == "prismatic":
+            m = p[0]
+            return Inertial(m, prior.com, prior.inertia_matrix() * (m / prior.mass))
+        m = prior.mass
+        md = p[1:3] if len(self.names) == 4 else self.prior_md
+        r_perp = (md / m) @ self.basis
+        com_world = self.joint.origin + self.along + r_perp
+        com = self.R.T @ (com_world - np.asarray(self.placement.position))
+        # the prior's inertia about the COM, scaled so the moment about the joint axis is the identified one
+        scale = max((p[0] - m * r_perp @ r_perp) / (a @ self.I0_world @ a), 1e-3)
+        return Inertial(m, com, prior.inertia_matrix() * scale)
+
+
+def _least_squares(parts, joint: JointFit, body: _BodyMap, config: JointedConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Linear least squares on the equation of motion (zero-phase low-passed q and tau); values and covariance."""
+    rows, rhs = [], []
+    for recording in parts:
+        t = recording.pose.t_s
+        q = joint_coordinates(joint, recording.pose)
+        period = float(np.median(np.diff(t)))
+        grid = np.arange(t[0], t[-1], period)
+        qs = lowpass(np.interp(grid, t, q), config.smoothing_hz, 1 / period)
+        qd = np.gradient(qs, period)
+        qdd = np.gradient(qd, period)
+        t_w, tau = joint_effort(recording, joint)
+        tau = np.interp(grid, t_w, lowpass(tau, config.smoothing_hz, 1 / float(np.median(np.diff(t_w)))))
+        keep = slice(20, -20)
+        cols = [qdd]
+        if body.joint.type == "prismatic":
+            cols[0] = qdd - GRAVITY_M_S2 @ joint.axis  # m (q'' - g.a) = tau - friction
+        elif len(body.names) == 4:
+            R_q = Rotation.from_rotvec(np.outer(qs, joint.axis))
+            for e in body.basis:  # M q'' - a.(R(q) e x g) (m d)_e
+                cols.append(-(np.cross(R_q.apply(e), GRAVITY_M_S2) @ joint.axis))
+        cols.append(np.tanh(qd / config.friction_smoothing))
+        rows.append(np.stack(cols, 1)[keep])
+        rhs.append(tau[keep])
+    A, b = np.concatenate(rows), np.concatenate(rhs)
+    x, *_ = np.linalg.lstsq(A, b, rcond=None)
+    r = b - A @ x
+    cov = (r @ r) / max(1, len(b) - len(x)) * np.linalg.inv(A.T @ A)
+    return x, cov
+
+
+def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, holdout=None,
+                     config: JointedConfig = JointedConfig(), progress=None) -> JointedIdentification:
+    """Identify the part's joint physics from `trials` (Recordings) on the joint found by `detect_kind`.
+
+    placement: the object frame in world at q = 0; prior: the part's prior body
+    (object frame). holdout: a Recording whose windowed replay RMSE is reported.
+    """
+    tilt = np.linalg.norm(np.cross(joint.axis, [0.0, 0.0, 1.0]))
+    gravity = joint.type == "revolute" and tilt >= np.sin(config.gravity_min_tilt_rad)
+    body = _BodyMap(joint, placement, prior, gravity)
+    x_ls, cov_ls = _least_squares(trials, joint, body, config)
+    least_squares = {n: {"value": float(v), "std": float(np.sqrt(cov_ls[i, i]))}
+                     for i, (n, v) in enumerate(zip(body.names, x_ls))}
+
+    windows = _concat([joint_windows(r, joint, config) for r in trials])
+    W = windows.q.shape[1]
+    P = len(body.names)
+    scale = np.maximum(np.abs(x_ls), 1e-6)
+    rollout = _Rollout(windows, 1 + 2 * (P + 2), joint, placement, prior, config.friction_smoothing)
+    sigma_q = 1.0  # residuals in q units; the sandwich covariance needs no noise level
+
+    def evaluate(p, dq0, dqd0):
+        """Residuals [S, W] at p and their Jacobian columns: dR/dp [P, S, W], dR/d(dq0) and dR/d(dqd0) [S, W]."""
+        h = 1e-3 * scale
+        hq, hqd = 1e-5 * max(np.ptp(windows.q), 1e-3), 1e-4 * max(np.ptp(windows.q), 1e-3)
+        params, starts_q, starts_qd = [p], [dq0], [dqd0]
+        for i in range(P):
+            for s in (1, -1):
+                pp = p.copy()
+                pp[i] += s * h[i]
+                params.append(pp)
+                starts_q.append(dq0)
+                starts_qd.append(dqd0)
+        for s in (1, -1):
+            params += [p, p]
+            starts_q += [dq0 + s * hq, dq0]
+            starts_qd += [dqd0, dqd0 + s * hqd]
+        inertials = [body.inertial(pp) for pp in params]
+        q = rollout.run(inertials, np.array([pp[-1] for pp in params]), np.array(starts_q), np.array(starts_qd))
+        r = (q[1:] - windows.q[1:][:, None, :]) / sigma_q
+        J = np.stack([(r[:, 1 + 2 * i] - r[:, 2 + 2 * i]) / (2 * h[i]) for i in range(P)])
+        k = 1 + 2 * P
+        Jq = (r[:, k] - r[:, k + 2]) / (2 * hq)
+        Jqd = (r[:, k + 1] - r[:, k + 3]) / (2 * hqd)
+        return r[:, 0], J, Jq, Jqd
+
+    def solve(r, J, Jq, Jqd, lam):
+        """LM step with each window's start offsets eliminated (Schur complement)."""
+        A = np.einsum("isw,jsw->ij", J, J)
+        g = np.einsum("isw,sw->i", J, r)
+        B = np.stack([np.einsum("isw,sw->iw", J, Jq), np.einsum("isw,sw->iw", J, Jqd)], -1)  # [P, W, 2]
+        C = np.stack([np.stack([(Jq * Jq).sum(0), (Jq * Jqd).sum(0)], -1),
+                      np.stack([(Jq * Jqd).sum(0), (Jqd * Jqd).sum(0)], -1)], -2)  # [W, 2, 2]
+        h = np.stack([(Jq * r).sum(0), (Jqd * r).sum(0)], -1)  # [W, 2]
+        C = C + lam * np.einsum("wii->wi", C)[:, :, None] * np.eye(2) + 1e-18 * np.eye(2)
+        Cinv = np.linalg.inv(C)
+        A_s = A - np.einsum("iwa,wab,jwb->ij", B, Cinv, B)
+        g_s = g - np.einsum("iwa,wab,wb->i", B, Cinv, h)
+        A_s = A_s + lam * np.diag(np.diag(A_s))
+        dp = -np.linalg.solve(A_s, g_s)
+        ds = -np.einsum("wab,wb->wa", Cinv, h + np.einsum("iwa,i->wa", B, dp))
+        return dp, ds, A_s
+
+    p = x_ls.copy()
+    dq0, dqd0 = np.zeros((1, W)), np.zeros((1, W))
+    r, J, Jq, Jqd = evaluate(p, dq0[0], dqd0[0])
+    loss = float(np.sum(r * r))
+    history, lam = [loss], 1e-3
+    for _ in range(config.max_iterations):
+        dp, ds, _ = solve(r, J, Jq, Jqd, lam)
+        trial = (p + dp, dq0[0] + ds[:, 0], dqd0[0] + ds[:, 1])
+        if body.joint.type == "prismatic" and trial[0][0] <= 0:
+            lam *= 10
+            continue
+        r2, J2, Jq2, Jqd2 = evaluate(*trial)
+        loss2 = float(np.sum(r2 * r2))
+        if loss2 < loss:
+            done = loss - loss2 < 1e-8 * loss
+            p, dq0[0], dqd0[0] = trial
+            r, J, Jq, Jqd, loss = r2, J2, Jq2, Jqd2, loss2
+            lam = max(lam / 3, 1e-6)
+            history.append(loss)
+            if progress:
+                progress(len(history), loss)
+            if done:
+                break
+        else:
+            lam *= 10
+            if lam > 1e6:
+                break
+
+    # window-clustered sandwich: the bread with start offsets eliminated, the meat from per-window scores
+    _, _, A_s = solve(r, J, Jq, Jqd, 0.0)
+    bread = np.linalg.inv(A_s)
+    C_w = np.stack([np.stack([(Jq * Jq).sum(0), (Jq * Jqd).sum(0)], -1),
+                    np.stack([(Jq * Jqd).sum(0), (Jqd * Jqd).sum(0)], -1)], -2)
+    B = np.stack([np.einsum("isw,sw->iw", J, Jq), np.einsum("isw,sw->iw", J, Jqd)], -1)
+    h_w = np.stack([(Jq * r).sum(0), (Jqd * r).sum(0)], -1)
+    score = np.einsum("isw,sw->wi", J, r) - np.einsum("iwa,wab,wb->wi", B, np.linalg.inv(C_w + 1e-18 * np.eye(2)), h_w)
+    covariance = bread @ (score.T @ score) * (W / max(W - 1, 1)) @ bread
+
+    fits = {"window_s": config.window_s, "trial_rmse_q": float(np.sqrt(np.mean(r * r)))}
+    selected, traces = "newton", None
+    if holdout is not None:
+        replays = {name: _replay(holdout, joint, placement, prior, body, values, config)
+                   for name, values in (("prior", body.prior_values(0.0)), ("least_squares", x_ls), ("newton", p))}
+        fits["holdout"] = {name: replay[0] for name, replay in replays.items()}
+        if fits["holdout"]["least_squares"]["rmse_q"] < fits["holdout"]["newton"]["rmse_q"]:
+            selected, p, covariance = "least_squares", x_ls, cov_ls
+        _, q_prior, w = replays["prior"]
+        traces = {"t_s": w.t_s, "measured": w.q[1:], "prior": q_prior, "kept": replays[selected][1]}
+    return JointedIdentification(body.names, p, covariance, least_squares, body.inertial(p), body.basis,
+                                 fits, tuple(history), selected, traces)
+
+
+def _replay(recording, joint, placement, prior, body: _BodyMap, p, config: JointedConfig):
+    """Windowed replay of `recording` from measured starts: (RMSE of q and of the tracked frame's position,
+    simulated q [S, W], the windows)."""
+    w = joint_windows(recording, joint, config)
+    q = _Rollout(w, 1, joint, placement, prior, config.friction_smoothing).run(
+        [body.inertial(p)], np.array([p[-1]]), np.zeros((1, w.q.shape[1])), np.zeros((1, w.q.shape[1])))[1:, 0]
+    return q_and_position_rmse(joint, q, w.q[1:]), q, w
+
+
+def q_and_position_rmse(joint: JointFit, q_sim: np.ndarray, q_meas: np.ndarray) -> dict:
+    """RMSE of q and of the tracked frame's position [m] between two arrays of q on the same joint."""
+    p0 = np.asarray(joint.tracked_at_zero.position)
+    if joint.type == "prismatic":
+        dp = np.abs(q_sim - q_meas)
+    else:
+        lever = np.linalg.norm(np.cross(joint.axis, p0 - joint.origin))
+        dp = 2 * lever * np.abs(np.sin(0.5 * (q_sim - q_meas)))
+    return {"rmse_q": float(np.sqrt(np.mean((q_sim - q_meas) ** 2))),
+            "rmse_position_m": float(np.sqrt(np.mean(dp**2)))}

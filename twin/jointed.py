@@ -1,0 +1,152 @@
+"""`twin build` for drawers and doors: the part on the joint its motion shows, a fixed base, joint physics."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+LIMIT_MARGIN = 0.1
+"""Joint limits: the observed travel widened by this share of it on each side (plus 5 mm or 0.05 rad)."""
+
+
+def joint_limits(joint_type: str, q_observed: np.ndarray) -> tuple[float, float]:
+    lo, hi = float(np.min(q_observed)), float(np.max(q_observed))
+    pad = LIMIT_MARGIN * (hi - lo) + (0.005 if joint_type == "prismatic" else 0.05)
+    return lo - pad, hi + pad
+
+
+def _prior_estimate(value, lower, upper, prior_doc=None):
+    """A quantity taken from the prior: its 95 % interval is the prior's bounds C."""
+    from assets import Estimate
+
+    if np.ndim(value) == 0:
+        return Estimate(float(value), float((upper - lower) / 4), source="prior",
+                        interval95=(float(lower), float(upper)), prior=prior_doc)
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    return Estimate(value, (upper - lower) / 4, source="prior", interval95=(lower, upper), prior=prior_doc)
+
+
+def jointed_theta(identified, prior, joint_type: str):
+    """theta of the part: measured where the joint's motion determines it, prior elsewhere."""
+    from assets import Estimate, Theta
+
+    inertial = identified.inertial
+    lo, hi = np.asarray(prior.lower), np.asarray(prior.upper)
+    ci = lambda v, s: (float(v - 1.96 * s), float(v + 1.96 * s))  # noqa: E731
+    friction = Estimate(identified.value("friction"), identified.std("friction"),
+                        interval95=ci(identified.value("friction"), identified.std("friction")))
+    # the tensor is the prior's, scaled by what was measured (mass, or the moment about the axis)
+    scale = inertial.inertia_matrix()[0, 0] / prior.inertial.inertia_matrix()[0, 0]
+    inertia = _prior_estimate(inertial.inertia, np.diag(lo[4:7] * scale), np.diag(hi[4:7] * scale))
+    if joint_type == "prismatic":
+        m, s = identified.value("mass"), identified.std("mass")
+        return Theta(Estimate(m, s, interval95=ci(m, s), prior=prior.provenance()),
+                     _prior_estimate(inertial.com, lo[1:4], hi[1:4]), inertia, friction)
+    determined = [("axis_inertia", Estimate(identified.value("axis_inertia"), identified.std("axis_inertia"),
+                                            interval95=ci(identified.value("axis_inertia"),
+                                                          identified.std("axis_inertia"))))]
+    if "gravity_moment_e1" in identified.names:
+        i = [identified.names.index("gravity_moment_e1"), identified.names.index("gravity_moment_e2")]
+        md = identified.values[i]
+        g = np.linalg.norm(md)
+        s = float(np.sqrt(md @ identified.covariance[np.ix_(i, i)] @ md) / max(g, 1e-12))
+        determined.append(("gravity_moment", Estimate(g, s, interval95=ci(g, s))))
+    mass = _prior_estimate(prior.inertial.mass, lo[0], hi[0], prior.provenance())
+    return Theta(mass, _prior_estimate(inertial.com, lo[1:4], hi[1:4]), inertia, friction, tuple(determined))
+
+
+def build_jointed(config, trials, holdout, detection, mesh_object, placement, parts, prior, name, scan_stats,
+                  timer, log, t_start) -> Path:
+    """Identify the part on its joint, export base + part + joint, validate, replay the held-out trial in MuJoCo."""
+    import trimesh
+
+    from assets import Asset, Fit, FitMetrics, Geometry, Joint, Material, asset_to_json, write_asset
+    from exporters import export_all
+    from pipelines.identify.jointed import JointedConfig, identify_jointed
+    from pipelines.identify.kind import joint_coordinates
+    from pipelines.validate import replay_jointed_mujoco, validate_jointed_exports
+
+    from .build import _replace_dir
+
+    fit = detection.joint
+    jconfig = JointedConfig()
+    identified = timer.run("identify (Featherstone)", identify_jointed, trials, fit, placement, prior.inertial,
+                           holdout, jconfig)
+    # every recording shows travel the part can make, the held-out one too
+    q_all = np.concatenate([joint_coordinates(fit, t.pose) for t in (*trials, *filter(None, [holdout]))])
+    lower, upper = joint_limits(fit.type, q_all)
+    joint = Joint(fit.type, tuple(fit.axis), tuple(fit.origin), lower, upper, axis_std_rad=fit.axis_std_rad,
+                  origin_std_m=tuple(fit.origin_std_m))
+    theta = jointed_theta(identified, prior, fit.type)
+    held = identified.fits.get("holdout", {})
+    metrics = lambda d: FitMetrics(d["rmse_position_m"], d["rmse_q"] if fit.type == "revolute" else 0.0,  # noqa: E731
+                                   d["rmse_q"])
+    out = Path(config.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        (tmp / "meshes").mkdir()
+        mesh_object.export(tmp / "meshes" / "visual.obj")
+        collision = []
+        for k, part in enumerate(parts.parts):
+            rel = f"meshes/collision_{k:03d}.obj"
+            part.export(tmp / rel)
+            collision.append(rel)
+        base = None
+        if config.base_mesh:
+            try:
+                trimesh.load(config.base_mesh, force="mesh").export(tmp / "meshes" / "base.obj")
+            except Exception as exc:  # trimesh raises many types for bad files
+                raise ValueError(f"{config.base_mesh}: cannot read base mesh ({exc})") from exc
+            base = "meshes/base.obj"
+        asset = Asset(
+            name=name, kind=fit.type, placement=placement, theta=theta,
+            geometry=Geometry("meshes/visual.obj", tuple(collision), base),
+            material=Material(prior.material.name, float(theta.mass.value / mesh_object.volume), prior.friction[0]),
+            joint=joint,
+            fit=Fit(metrics(held["prior"]), metrics(held[identified.selected]), jconfig.window_s) if held else None,
+        )
+        paths = timer.run("export", export_all, asset, tmp)
+        files = {**paths.to_json(relative_to=tmp), **({"report": "report.html"} if identified.traces else {})}
+        validation = timer.run("validate", validate_jointed_exports, asset, tmp, files)
+        replay = {}
+        if holdout is not None:
+            replay = {"mujoco": timer.run("replay (MuJoCo)", replay_jointed_mujoco, paths.mjcf, asset, holdout, fit,
+                                          jconfig),
+                      "newton": held[identified.selected]}
+            log(f"held-out replay: MuJoCo {replay['mujoco']}, Newton {replay['newton']}")
+        provenance = {
+            "config": json.loads(json.dumps(asdict(config), default=str)),
+            "scan": scan_stats,
+            "decompose": parts.stats,
+            "prior": prior.provenance(),
+            "kind": detection.to_json(),
+            "identify": {"method": "featherstone", "config": asdict(jconfig), **identified.provenance()},
+            "validation": validation,
+            "heldout_replay": replay,
+            "timings_s": timer.seconds | {"total": time.perf_counter() - t_start},
+        }
+        asset = Asset(**{**asset.__dict__, "files": files, "provenance": provenance})
+        write_asset(asset, tmp / "asset.json")
+        if identified.traces:
+            from twin.report import write_report
+
+            tr = identified.traces
+            write_report(tmp / "report.html", asset_to_json(asset), identified.loss_history, {
+                "t_s": tr["t_s"].reshape(-1), "window_s": jconfig.window_s,
+                "measured_position": fit.tracked_position(tr["measured"]).reshape(-1, 3),
+                "baseline_position": fit.tracked_position(tr["prior"]).reshape(-1, 3),
+                "final_position": fit.tracked_position(tr["kept"]).reshape(-1, 3),
+            })
+        _replace_dir(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    log(f"wrote {out}/ ({fit.type} joint) in {time.perf_counter() - t_start:.1f} s")
+    return out
