@@ -182,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 from twin.bench.paper import bench_paper
 
-                bench_paper(command.seeds, paper_optimizer=command.paper_optimizer, from_vlm_starts=command.vlm_starts)
+                bench_paper(command.seeds, paper_optimizer=command.paper_optimizer,
+                            from_vlm_starts=command.vlm_starts)
     except (ValueError, RuntimeError, OSError) as exc:
         print(f"twin: error: {exc}", file=sys.stderr)
         return 1
