@@ -41,6 +41,18 @@ class BuildConfig:
     cache_dir: Path = Path.home() / ".cache" / "twin"
     vlm: str | None = None
     vlm_model: str | None = None
+    kind: Literal["free", "sliding"] = "free"
+    topics: tuple[tuple[str, str], ...] = ()
+    """(role, topic) overrides for reading the recordings."""
+    frames: tuple[tuple[str, str], ...] = ()
+    """(role, frame id) for wrench or contact messages whose header leaves it empty."""
+    wrench_rotation_xyzw: tuple[float, float, float, float] | None = None
+
+    def read(self, path: Path):
+        """One recording, read with this build's topic, frame and rotation options."""
+        from pipelines.logs import read_recording
+
+        return read_recording(path, dict(self.topics), dict(self.frames), self.wrench_rotation_xyzw)
 
 
 @dataclass
@@ -68,7 +80,6 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     from exporters import export_all
     from pipelines.decompose import DecomposeConfig, decompose
     from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
-    from pipelines.logs import read_recording
     from pipelines.priors import VlmConfig, ask_vlm, describe_object, estimate_prior, scan_image
     from pipelines.validate import validate_exports
 
@@ -79,12 +90,12 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     if config.vlm and not config.vlm_model:
         raise BuildError(f"--vlm {config.vlm} needs --vlm-model NAME")
     for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
-        if not Path(path).is_file():
+        if not Path(path).exists():
             raise BuildError(f"{path}: recording not found")
 
     # Recordings are read first: they are quick, and a bad file should fail before minutes of geometry.
-    trials = [timer.run(f"logs {p.name}", read_recording, p) for p in config.logs]
-    holdout = timer.run(f"logs {config.holdout.name}", read_recording, config.holdout) if config.holdout else None
+    trials = [timer.run(f"logs {p.name}", config.read, p) for p in config.logs]
+    holdout = timer.run(f"logs {config.holdout.name}", config.read, config.holdout) if config.holdout else None
     mesh_world, name, hint, scan_stats = timer.run("scan + reconstruct", _object_mesh, config)
     name = config.name or name
     placement = Pose(tuple(mesh_world.center_mass), (0.0, 0.0, 0.0, 1.0))

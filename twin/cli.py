@@ -40,6 +40,23 @@ class Build:
     Any failure falls back to the offline prior."""
     vlm_model: str | None = None
     """Model name on the --vlm server (an image-capable one)."""
+    kind: Literal["free", "sliding"] = "free"
+    """free: held and moved through the air; sliding: pushed across a support surface."""
+    topic: tyro.conf.UseAppendAction[tuple[str, ...]] = ()
+    """ROLE=/name: the topic for a role (pose, wrench, contact, joint); repeat per role.
+    A contact topic may be a PoseStamped (its origin is the point, e.g. a pusher tip)."""
+    frame: tyro.conf.UseAppendAction[tuple[str, ...]] = ()
+    """ROLE=frame_id: the frame of wrench or contact messages whose header leaves it empty."""
+    wrench_rotation: tuple[float, float, float, float] | None = None
+    """Fixed sensor-to-world rotation of the wrench messages, quaternion x y z w (when the sensor frame is not in /tf)."""
+
+
+@dataclass(frozen=True)
+class Inspect:
+    """List an MCAP recording's topics with their types, message counts, rates and time spans."""
+
+    file: tyro.conf.Positional[Path]
+    """The .mcap file (or a rosbag2 directory holding one)."""
 
 
 @dataclass(frozen=True)
@@ -99,10 +116,36 @@ def _run_build(args: Build) -> None:
             source=args.source, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
             name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
             optimizer=args.optimizer,
-            vlm=args.vlm, vlm_model=args.vlm_model,
+            vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind,
+            topics=_role_map(args.topic, "--topic"), frames=_role_map(args.frame, "--frame"),
+            wrench_rotation_xyzw=args.wrench_rotation,
         ),
         log=_log,
     )
+
+
+def _role_map(items: tuple[str, ...], flag: str) -> tuple[tuple[str, str], ...]:
+    """ROLE=value options as (role, value) pairs; a malformed one is a ValueError naming it."""
+    pairs = []
+    for item in items:
+        role, sep, value = item.partition("=")
+        if not sep or not role or not value:
+            raise ValueError(f"{flag} {item!r}: expected ROLE=VALUE, e.g. {flag} wrench=/netft_data")
+        pairs.append((role, value))
+    return tuple(pairs)
+
+
+def _run_inspect(args: Inspect) -> None:
+    from pipelines.logs import inspect_recording
+
+    rows = inspect_recording(args.file)
+    width = max([len("topic")] + [len(r.topic) for r in rows])
+    type_width = max([len("type")] + [len(r.type) for r in rows])
+    print(f"{args.file}")
+    print(f"{'topic':<{width}}  {'type':<{type_width}}  {'count':>7}  {'rate Hz':>8}  {'start s':>16}  {'span s':>8}")
+    for r in rows:
+        print(f"{r.topic:<{width}}  {r.type:<{type_width}}  {r.count:>7}  {r.rate_hz:>8.2f}  "
+              f"{r.t_start_s:>16.3f}  {r.t_end_s - r.t_start_s:>8.3f}")
 
 
 def _run_synth(args: Synth) -> None:
@@ -126,10 +169,12 @@ def main(argv: list[str] | None = None) -> int:
 
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # no per-module load lines in the progress log
-    command = tyro.extras.subcommand_cli_from_dict({"build": Build, "synth": Synth, "bench": Bench}, args=argv)
+    command = tyro.extras.subcommand_cli_from_dict({"build": Build, "inspect": Inspect, "synth": Synth, "bench": Bench}, args=argv)
     try:
         if isinstance(command, Build):
             _run_build(command)
+        elif isinstance(command, Inspect):
+            _run_inspect(command)
         elif isinstance(command, Synth):
             _run_synth(command)
         else:
