@@ -778,6 +778,7 @@ def read_recording(
     topics: dict[str, str] | None = None,
     frames: dict[str, str] | None = None,
     wrench_rotation_xyzw: tuple[float, float, float, float] | None = None,
+    wrench_reaction: bool = False,
 ) -> Recording:
     """Read one trial from an MCAP file (or a rosbag2 directory holding one).
 
@@ -795,6 +796,9 @@ def read_recording(
             in /tf. The wrench then acts at the contact point when a contact
             topic exists, else at the tracked frame's origin, as a world
             wrench does.
+        wrench_reaction: the messages give the wrench ON the sensor (the
+            object's reaction, as a tool-mounted F/T sensor reports it, e.g. the
+            MIT pushing bags); it is negated to the wrench applied TO the object.
 
     Returns:
         A Recording whose `wrench` is in world axes with its torque about the
@@ -946,8 +950,9 @@ def read_recording(
                 stacklevel=2,
             )
             e.extrapolated = 0
-    force = r_wf.apply(f_w)
-    torque = r_wf.apply(tau_w)
+    sign = -1.0 if wrench_reaction else 1.0
+    force = sign * r_wf.apply(f_w)
+    torque = sign * r_wf.apply(tau_w)
     if p_frame is not None:
         p_track, _ = pose.interpolate(t_w)
         torque = torque + np.cross(p_frame - p_track, force)

@@ -49,6 +49,8 @@ class Build:
     """ROLE=frame_id: the frame of wrench or contact messages whose header leaves it empty."""
     wrench_rotation: tuple[float, float, float, float] | None = None
     """Fixed sensor-to-world rotation of the wrench messages, quaternion x y z w (when the sensor frame is not in /tf)."""
+    wrench_reaction: bool = False
+    """The wrench messages give the force ON the sensor (a tool-mounted F/T sensor's reading): negate it."""
 
 
 @dataclass(frozen=True)
@@ -84,9 +86,11 @@ class Bench:
     crlb: spread of the estimates over --draws noise draws against the Cramer-Rao bound.
     mujoco: paper's recordings identified by mujoco.sysid (pseudo-inertia) and by ours, side by side.
     reconstruct: scans of real meshes and primitives (3-30 cm, two noise levels) against their truth; real Kinect frames.
+    push: synthetic pushes with known friction (--seeds of them): friction, mass and yaw inertia errors.
+    push-real: the MIT block pushes: friction per trial and its spread, quasi-static estimate, predictive validity.
     """
 
-    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct"]]
+    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct", "push", "push-real"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -118,7 +122,7 @@ def _run_build(args: Build) -> None:
             optimizer=args.optimizer,
             vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind,
             topics=_role_map(args.topic, "--topic"), frames=_role_map(args.frame, "--frame"),
-            wrench_rotation_xyzw=args.wrench_rotation,
+            wrench_rotation_xyzw=args.wrench_rotation, wrench_reaction=args.wrench_reaction,
         ),
         log=_log,
     )
@@ -198,6 +202,14 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.reconstruct import bench_reconstruct
 
                 bench_reconstruct(quick=command.quick)
+            elif command.what == "push":
+                from twin.bench.push import bench_push
+
+                bench_push(command.seeds)
+            elif command.what == "push-real":
+                from twin.bench.push import bench_push_real
+
+                bench_push_real()
             elif command.what == "priors":
                 from twin.bench.priors import bench_priors
 

@@ -38,8 +38,12 @@ __all__ = [
     "SlidingConfig",
     "SlidingFit",
     "SlidingRollout",
+    "PushedIdentification",
+    "concat_push_windows",
     "estimate_force_bias",
+    "identify_pushed",
     "identify_sliding",
+    "replay_errors",
     "push_windows",
     "quasi_static_friction",
 ]
@@ -92,18 +96,26 @@ class SlidingConfig:
     """
 
     window_s: float = 0.3
-    dt_s: float = 1e-3
+    dt_s: float = 2e-3
     moving_speed_m_s: float = 0.01
     contact_margin_m: float = 0.02
     yaw_length_m: float | None = None
     mu_bounds: tuple[float, float] = (0.02, 2.0)
     smoothing_hz: float = 10.0
+    sample_period_s: float = 0.01
+    """Pose samples are resampled to this period [s], so windows of any recording share one batch."""
+    jump_m: float = 0.005
+    """Tracker samples further than this from a running median are dropped [m]."""
     twist_half_width: int = 3
-    max_iterations: int = 25
-    contact_ke: float = 2.0e4
-    """Normal stiffness of the whole face [N/m], shared by its point contacts."""
-    contact_kd: float = 300.0
-    """Normal damping of the whole face [N s/m]."""
+    max_iterations: int = 80
+    contact_sink_m: float = 3e-4
+    """Static sink of the face under the object's weight [m]: sets the normal stiffness m g / sink,
+    so the contact's frequency sqrt(g / sink) is the same for any mass."""
+    contact_damping_ratio: float = 0.7
+    fit_mass: bool = False
+    """Fit the mass too. Pushes determine mu m through the force balance; the split rests on the
+    accelerations, which 5 ms of force-to-pose timing error moves by about 10 % (twin bench push),
+    so by default the mass keeps its prior (marked so) and mu is measured given it."""
 
 
 @dataclass(frozen=True)
@@ -138,17 +150,32 @@ class PushWindows:
         return self.measured.shape[0] - 1
 
 
-def _planar_grid(recording, smoothing_hz: float | None):
-    """Pose track on a uniform grid: t [s], xy [m], yaw [rad, unwrapped], all low-passed if asked."""
+def _planar_grid(recording, config: "SlidingConfig", smooth: bool):
+    """Pose track on a uniform grid of config.sample_period_s: t [s], xy [m], yaw [rad, unwrapped].
+
+    Tracker jumps (samples off a running median by more than config.jump_m, or
+    config.jump_m / 0.05 m in heading) are dropped first; with `smooth`, the
+    result is low-passed at config.smoothing_hz.
+    """
+    from scipy.signal import medfilt
+
     pose = recording.pose
     t = pose.t_s
-    period = float(np.median(np.diff(t)))
-    grid = t[0] + period * np.arange(int(np.floor((t[-1] - t[0]) / period)) + 1)
+    xy_raw = pose.position[:, :2]
     yaw_raw = np.unwrap(_yaw(pose.quat_xyzw))
-    xy = np.stack([np.interp(grid, t, pose.position[:, k]) for k in range(2)], axis=1)
+    if len(t) > 9:
+        off_xy = np.linalg.norm(xy_raw - np.stack([medfilt(xy_raw[:, k], 9) for k in range(2)], axis=1), axis=1)
+        wrapped = np.angle(np.exp(1j * (yaw_raw - medfilt(yaw_raw, 9))))
+        keep = (off_xy < config.jump_m) & (np.abs(wrapped) < config.jump_m / 0.05)
+        t, xy_raw = t[keep], xy_raw[keep]
+        yaw_raw = np.unwrap(yaw_raw[keep])
+    period = config.sample_period_s
+    grid = t[0] + period * np.arange(int(np.floor((t[-1] - t[0]) / period)) + 1)
+    xy = np.stack([np.interp(grid, t, xy_raw[:, k]) for k in range(2)], axis=1)
     yaw = np.interp(grid, t, yaw_raw)
-    if smoothing_hz:
-        xy, yaw = lowpass(xy, smoothing_hz, 1 / period), lowpass(yaw[:, None], smoothing_hz, 1 / period)[:, 0]
+    if smooth:
+        xy = lowpass(xy, config.smoothing_hz, 1 / period)
+        yaw = lowpass(yaw[:, None], config.smoothing_hz, 1 / period)[:, 0]
     return grid, xy, yaw
 
 
@@ -165,9 +192,11 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
     pusher may already press while friction holds). The F/T sensors of real bags
     are often not zeroed (mit-push README). Zeros when there is no such interval.
     """
-    grid, xy, _ = _planar_grid(recording, config.smoothing_hz)
+    grid, xy, _ = _planar_grid(recording, config, smooth=True)
     speed = np.linalg.norm(np.gradient(xy, grid, axis=0), axis=1)
-    moving = np.flatnonzero(speed > config.moving_speed_m_s)
+    run = 10  # samples: a filter's edge or a tracker glitch is not motion
+    fast = (speed > config.moving_speed_m_s).astype(float)
+    moving = np.flatnonzero(np.convolve(fast, np.ones(run), "valid") == run)
     t_w = recording.wrench.t_s
     quiet = t_w < (grid[moving[0]] if len(moving) else grid[-1]) - margin_s
     if quiet.sum() < 10:
@@ -189,7 +218,7 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: np.nd
             "(a PointStamped or pose topic; name it with --topic contact=/name)"
         )
     bias = np.zeros(3) if bias is None else np.asarray(bias, dtype=float)
-    grid, xy, yaw = _planar_grid(recording, None)  # targets as measured: smoothing would blunt stops
+    grid, xy, yaw = _planar_grid(recording, config, smooth=False)  # smoothing would blunt stops
     period = grid[1] - grid[0]
     substeps = max(1, int(round(period / config.dt_s)))
     dt = period / substeps
@@ -280,15 +309,18 @@ def assign_sliding_params(
 @wp.kernel
 def set_planar_start_state(
     start: wp.array[wp.spatial_vector],
+    velocity_correction: wp.array[wp.vec3],
     rest_height_m: float,
     body_q: wp.array[wp.transform],
     body_qd: wp.array[wp.spatial_vector],
 ):
-    """Body w at (x, y, rest height), heading yaw, velocity (vx, vy, 0), angular velocity (0, 0, yaw rate)."""
+    """Body w at (x, y, rest height), heading yaw, velocity (vx, vy, 0) [m/s] and yaw rate [rad/s],
+    each rate plus the window's correction (vx, vy, yaw rate)."""
     w = wp.tid()
     s = start[w]
+    c = velocity_correction[w]
     body_q[w] = wp.transform(wp.vec3(s[0], s[1], rest_height_m), wp.quat_from_axis_angle(wp.vec3(0.0, 0.0, 1.0), s[2]))
-    body_qd[w] = wp.spatial_vector(wp.vec3(s[3], s[4], 0.0), wp.vec3(0.0, 0.0, s[5]))
+    body_qd[w] = wp.spatial_vector(wp.vec3(s[3] + c[0], s[4] + c[1], 0.0), wp.vec3(0.0, 0.0, s[5] + c[2]))
 
 
 @wp.kernel
@@ -356,11 +388,13 @@ class SlidingRollout:
         radius = 1e-3
         cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0  # cell centres on [-1, 1]
         n_contacts = _GRID * _GRID
+        ke = body.mass_kg * GRAVITY_M_S2 / config.contact_sink_m
+        kd = 2.0 * config.contact_damping_ratio * np.sqrt(ke * body.mass_kg)
         cfg = newton.ModelBuilder.ShapeConfig(
-            ke=config.contact_ke / n_contacts, kd=config.contact_kd / n_contacts,
-            # slip speed mu g * 4 dt: Coulomb (mu-sensitive) at every speed a push is fitted at,
-            # while kf dt / (m / n) = 1/4 keeps the explicit viscous branch stable
-            kf=body.mass_kg / n_contacts / (4.0 * windows.dt_s), mu=0.5, density=0.0,
+            ke=ke / n_contacts, kd=kd / n_contacts,
+            # slip speed mu g dt: Coulomb (mu-sensitive) at the speeds a push is fitted at,
+            # while kf dt / (m / n) = 1 keeps the explicit viscous branch stable (deadbeat)
+            kf=body.mass_kg / n_contacts / windows.dt_s, mu=0.5, density=0.0,
         )
         sub = newton.ModelBuilder(gravity=(0.0, 0.0, -GRAVITY_M_S2), up_axis=newton.Axis.Z)
         b = sub.add_body(mass=body.mass_kg, inertia=wp.mat33(np.eye(3) * body.izz_kgm2), lock_inertia=True)
@@ -375,7 +409,7 @@ class SlidingRollout:
         self.solver = newton.solvers.SolverSemiImplicit(self.model, angular_damping=0.0)
         self.control = self.model.control()
         self.states = [self.model.state(requires_grad=True) for _ in range(windows.step_count + 1)]
-        self.rest_height_m = hz - body.mass_kg * GRAVITY_M_S2 / config.contact_ke
+        self.rest_height_m = hz - config.contact_sink_m
         m_box = body.mass_kg
         self.inertia_xy = wp.vec2(m_box * (hy * hy + hz * hz) / 3.0, m_box * (hx * hx + hz * hz) / 3.0)
         self.yaw_length_m = config.yaw_length_m or float(np.hypot(hx, hy))
@@ -385,13 +419,14 @@ class SlidingRollout:
         self.contact = wp.array(windows.contact.astype(np.float32), dtype=wp.vec2, device=device)
         self.measured = wp.array(windows.measured.astype(np.float32), dtype=wp.vec3, device=device)
         self.theta = wp.zeros(3, dtype=float, device=device, requires_grad=True)
+        self.correction = wp.zeros(W, dtype=wp.vec3, device=device, requires_grad=True)
         self.residual = wp.zeros((windows.sample_count + 1, W, 3), dtype=float, device=device, requires_grad=True)
         self.loss = wp.zeros(1, dtype=float, device=device, requires_grad=True)
 
         # Contacts against a plane depend only on the body-local sphere centres: found once.
         self.pipeline = newton.CollisionPipeline(self.model, broad_phase="explicit", requires_grad=True)
         self.contacts = self.pipeline.contacts()
-        wp.launch(set_planar_start_state, dim=W, inputs=[self.start, self.rest_height_m],
+        wp.launch(set_planar_start_state, dim=W, inputs=[self.start, self.correction, self.rest_height_m],
                   outputs=[self.states[0].body_q, self.states[0].body_qd], device=device)
         self.pipeline.collide(self.states[0], self.contacts)
         found = int(self.contacts.rigid_contact_count.numpy()[0])
@@ -404,7 +439,7 @@ class SlidingRollout:
                   outputs=[model.body_mass, model.body_inv_mass, model.body_inertia, model.body_inv_inertia,
                            model.shape_material_mu], device=self.device)
         s0 = self.states[0]
-        wp.launch(set_planar_start_state, dim=w.window_count, inputs=[self.start, self.rest_height_m],
+        wp.launch(set_planar_start_state, dim=w.window_count, inputs=[self.start, self.correction, self.rest_height_m],
                   outputs=[s0.body_q, s0.body_qd], device=self.device)
         self.residual.zero_()
         for step in range(w.step_count):
@@ -418,23 +453,32 @@ class SlidingRollout:
                           inputs=[s_next.body_q, self.measured, (step + 1) // w.substeps, self.yaw_length_m],
                           outputs=[self.residual], device=self.device)
 
-    def residuals(self, theta) -> np.ndarray:
-        """Errors [S, W, 3] at samples 1..S: x, y [m], heading x yaw_length_m [m]."""
+    def _load(self, theta, correction) -> None:
         self.theta.assign(np.asarray(theta, dtype=np.float32))
+        W = self.windows.window_count
+        c = np.zeros((W, 3)) if correction is None else np.asarray(correction).reshape(W, 3)
+        self.correction.assign(c.astype(np.float32))
+
+    def residuals(self, theta, correction=None) -> np.ndarray:
+        """Errors [S, W, 3] at samples 1..S: x, y [m], heading x yaw_length_m [m].
+
+        correction [W, 3]: start-velocity corrections (vx, vy [m/s], yaw rate [rad/s]).
+        """
+        self._load(theta, correction)
         self._forward()
         return self.residual.numpy()[1:].astype(float)
 
-    def trajectories(self, theta) -> np.ndarray:
+    def trajectories(self, theta, correction=None) -> np.ndarray:
         """Simulated x, y [m] and yaw [rad] at samples 0..S, shape [S+1, W, 3]."""
-        r = self.residuals(theta)
+        r = self.residuals(theta, correction)
         pred = self.windows.measured.copy()
         pred[1:, :, :2] += r[:, :, :2]
         pred[1:, :, 2] += r[:, :, 2] / self.yaw_length_m
         return pred
 
-    def loss_and_grad(self, theta) -> tuple[float, np.ndarray]:
-        """Sum of squared residuals [m^2] and its gradient w.r.t. theta, from the tape."""
-        self.theta.assign(np.asarray(theta, dtype=np.float32))
+    def loss_and_grad(self, theta, correction=None) -> tuple[float, np.ndarray, np.ndarray]:
+        """Sum of squared residuals [m^2] and its gradients w.r.t. theta and the corrections [W, 3]."""
+        self._load(theta, correction)
         tape = wp.Tape()
         with tape:
             self._forward()
@@ -442,7 +486,8 @@ class SlidingRollout:
             wp.launch(eval_sum_squares, dim=self.residual.shape, inputs=[self.residual], outputs=[self.loss],
                       device=self.device)
         tape.backward(self.loss)
-        out = float(self.loss.numpy()[0]), self.theta.grad.numpy().astype(float).copy()
+        out = (float(self.loss.numpy()[0]), self.theta.grad.numpy().astype(float).copy(),
+               self.correction.grad.numpy().astype(float).copy())
         tape.zero()
         return out
 
@@ -456,10 +501,12 @@ class SlidingFit:
     """Result of `identify_sliding`.
 
     theta: (mu, mass [kg], I_zz [kg m^2]); std: their standard deviations from the
-    curvature at the optimum (residuals treated as independent, so optimistic);
-    determined: per parameter, whether the data's curvature exceeds the prior's
-    (else the value is essentially the prior's and is marked "prior").
-    rmse_position_m, rmse_heading_rad: windowed replay at theta over the fitted windows.
+    curvature at the optimum, start velocities profiled out (residuals treated as
+    independent, so optimistic); determined: per parameter, whether the data at
+    least halve the prior's variance (else the value is essentially the prior's
+    and is marked "prior").
+    rmse_position_m, rmse_heading_rad: windowed replay at theta over the fitted
+    windows, each started at its fitted velocity.
     loss_history: objective per evaluation.
     """
 
@@ -471,7 +518,8 @@ class SlidingFit:
     window_count: int
     evaluations: int
     loss_history: list = field(default_factory=list)
-    bias_force_n: tuple = (0.0, 0.0, 0.0)
+    correction: np.ndarray | None = None
+    """Fitted start-velocity corrections per window [W, 3]: vx, vy [m/s], yaw rate [rad/s]."""
 
     def provenance(self) -> dict:
         names = ("friction", "mass", "izz")
@@ -483,13 +531,12 @@ class SlidingFit:
             "evaluations": self.evaluations,
             "rmse_position_m": self.rmse_position_m,
             "rmse_heading_rad": self.rmse_heading_rad,
-            "force_bias_world_n": list(self.bias_force_n),
         }
 
 
-def replay_errors(rollout: SlidingRollout, theta) -> tuple[float, float]:
+def replay_errors(rollout: SlidingRollout, theta, correction=None) -> tuple[float, float]:
     """Position RMSE [m] and heading RMSE [rad] of the windowed replay at theta."""
-    r = rollout.residuals(theta)
+    r = rollout.residuals(theta, correction)
     return float(np.sqrt(np.mean(np.sum(r[..., :2] ** 2, axis=-1)))), float(
         np.sqrt(np.mean(r[..., 2] ** 2)) / rollout.yaw_length_m
     )
@@ -512,66 +559,83 @@ def identify_sliding(
     from scipy.optimize import minimize
 
     rollout = SlidingRollout(windows, body, config, device)
+    W = windows.window_count
     prior = np.log([mu_prior, body.mass_kg, body.izz_kgm2])
     prior_std = np.array([np.inf, body.mass_rel_std, body.izz_rel_std])
+    prior_curv = np.where(np.isfinite(prior_std), 1.0 / prior_std**2, 0.0)
     lo = np.log([config.mu_bounds[0], body.mass_kg / 4, body.izz_kgm2 / 4])
     hi = np.log([config.mu_bounds[1], body.mass_kg * 4, body.izz_kgm2 * 4])
     free_idx = np.flatnonzero(free)
+    k = len(free_idx)
+    # corrections are optimised in units of a typical start-rate error: 1 cm/s and 0.1 rad/s
+    c_scale = np.tile([0.01, 0.01, 0.1], W)
     history: list[float] = []
-    n_res = windows.sample_count * windows.window_count * 3
+    n_res = windows.sample_count * W * 3
 
-    def full(u_free):
+    def split(x):
         u = prior.copy()
-        u[free_idx] = u_free
-        return u
+        u[free_idx] = x[:k]
+        return u, (x[k:] * c_scale).reshape(W, 3)
 
-    def objective(u_free, sigma2):
-        u = full(u_free)
+    def data_gradient(x, sigma2):
+        u, c = split(x)
         theta = np.exp(u)
-        loss, g = rollout.loss_and_grad(theta)
-        with np.errstate(divide="ignore"):
-            w_prior = np.where(np.isfinite(prior_std), 1.0 / prior_std**2, 0.0)
-        value = 0.5 * loss / sigma2 + 0.5 * np.sum(w_prior * (u - prior) ** 2)
-        grad = 0.5 * g * theta / sigma2 + w_prior * (u - prior)  # d/du = theta d/dtheta
-        history.append(float(value))
-        return value, grad[free_idx]
+        loss, g, gc = rollout.loss_and_grad(theta, c)
+        return 0.5 * loss / sigma2, np.concatenate([(0.5 * g * theta / sigma2)[free_idx],
+                                                    0.5 * gc.ravel() * c_scale / sigma2])
 
-    u0 = prior[free_idx]
-    sigma2 = (2e-3) ** 2  # first pass: a typical tracker-plus-model error [m]
+    def objective(x, sigma2):
+        value, grad = data_gradient(x, sigma2)
+        u, _ = split(x)
+        value += 0.5 * np.sum(prior_curv * (u - prior) ** 2)
+        grad[:k] += (prior_curv * (u - prior))[free_idx]
+        history.append(float(value))
+        return value, grad
+
+    # the data's weight against the prior is 1 / sigma^2: fitted at a typical tracker error first,
+    # then again at the residual level that fit leaves
+    x = np.concatenate([prior[free_idx], np.zeros(3 * W)])
+    bounds = list(zip(lo[free_idx], hi[free_idx])) + [(-20.0, 20.0)] * (3 * W)
+    sigma2 = (1e-3) ** 2
     for _ in range(2):
-        res = minimize(objective, u0, args=(sigma2,), jac=True, method="L-BFGS-B",
-                       bounds=list(zip(lo[free_idx], hi[free_idx])),
-                       options={"maxiter": config.max_iterations, "ftol": 1e-10, "gtol": 1e-8})
-        u0 = res.x
-        sse = float(np.sum(rollout.residuals(np.exp(full(u0))) ** 2))
-        sigma2 = max(sse / n_res, 1e-10)
-    u = full(u0)
+        x = minimize(objective, x, args=(sigma2,), jac=True, method="L-BFGS-B", bounds=bounds,
+                     options={"maxiter": config.max_iterations, "ftol": 1e-10, "gtol": 1e-8}).x
+        u, c = split(x)
+        sigma2 = max(float(np.sum(rollout.residuals(np.exp(u), c) ** 2)) / n_res, 1e-12)
+    u, correction = split(x)
     theta = np.exp(u)
 
-    # data curvature per free parameter (log space), by central differences of the tape gradient
-    def data_grad(u_full):
-        theta_ = np.exp(u_full)
-        _, g = rollout.loss_and_grad(theta_)
-        return 0.5 * g * theta_ / sigma2
-
-    H = np.zeros((3, 3))
-    for i in free_idx:
-        h = 1e-2
-        e = np.zeros(3)
-        e[i] = h
-        H[:, i] = (data_grad(u + e) - data_grad(u - e)) / (2 * h)
-    H = 0.5 * (H + H.T)
-    prior_curv = np.where(np.isfinite(prior_std), 1.0 / prior_std**2, 0.0)
-    determined = tuple(bool(free[i] and H[i, i] > prior_curv[i]) for i in range(3))
-    H_post = H + np.diag(prior_curv)
-    cov = np.zeros((3, 3))
-    sub = np.ix_(free_idx, free_idx)
-    cov[sub] = np.linalg.pinv(H_post[sub])
-    std_log = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    std_log = np.where(np.array(free), std_log, prior_std)
+    # curvature of the data term by central differences of the tape gradient. Each window's
+    # corrections touch only its own residuals, so their block is diagonal per window and three
+    # perturbations (one per component, all windows at once) give it; theta's columns take one each.
+    h = 1e-2
+    n = k + 3 * W
+    cols = {}
+    for j in range(k):
+        e = np.zeros(n)
+        e[j] = h
+        cols[j] = (data_gradient(x + e, sigma2)[1] - data_gradient(x - e, sigma2)[1]) / (2 * h)
+    H_tt = np.array([cols[j][:k] for j in range(k)])
+    H_ct = np.array([cols[j][k:] for j in range(k)]).T.reshape(W, 3, k)
+    H_cc = np.zeros((W, 3, 3))
+    for comp in range(3):
+        e = np.zeros(n)
+        e[k + comp::3] = h
+        d = ((data_gradient(x + e, sigma2)[1] - data_gradient(x - e, sigma2)[1]) / (2 * h))[k:].reshape(W, 3)
+        H_cc[:, :, comp] = d
+    H_cc = 0.5 * (H_cc + np.transpose(H_cc, (0, 2, 1)))
+    # theta's information with every window's start velocity profiled out (Schur complement)
+    H = 0.5 * (H_tt + H_tt.T) - sum(H_ct[w].T @ np.linalg.pinv(H_cc[w]) @ H_ct[w] for w in range(W))
+    H_post = H + np.diag(prior_curv[free_idx])
+    cov = np.linalg.pinv(H_post)
+    std_log = np.array(prior_std, dtype=float)
+    std_log[free_idx] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    # determined: the data at least halve the prior's variance (mu has no prior: determined when free)
+    determined = tuple(bool(free[i] and (not np.isfinite(prior_std[i]) or std_log[i] ** 2 < 0.5 * prior_std[i] ** 2))
+                       for i in range(3))
     std = theta * np.where(np.isfinite(std_log), std_log, 0.0)
-    rmse_p, rmse_h = replay_errors(rollout, theta)
-    return SlidingFit(theta, std, determined, rmse_p, rmse_h, windows.window_count, len(history), history)
+    rmse_p, rmse_h = replay_errors(rollout, theta, correction)
+    return SlidingFit(theta, std, determined, rmse_p, rmse_h, W, len(history), history, correction=correction)
 
 
 def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bias: np.ndarray,
@@ -587,3 +651,57 @@ def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bi
     f = np.linalg.norm(windows.force, axis=-1).ravel()
     pressing = f > 0.25 * np.percentile(f, 90)
     return float(np.median(f[pressing]) / (mass_kg * GRAVITY_M_S2))
+
+
+@dataclass(frozen=True)
+class PushedIdentification:
+    """What `identify_pushed` gives the build.
+
+    fit: the sliding fit on the trials; bias_force_n: per trial [N, world];
+    baseline and final: (position RMSE [m], heading RMSE [rad], loss [m^2]) of the
+    windowed replay at the prior's and the fitted theta, on the held-out recording
+    when there is one, else on the trials; traces: the replay for the report.
+    """
+
+    fit: SlidingFit
+    prior_theta: np.ndarray
+    bias_force_n: list
+    baseline: tuple[float, float, float]
+    final: tuple[float, float, float]
+    traces: dict
+    config: SlidingConfig
+
+    def provenance(self) -> dict:
+        from dataclasses import asdict
+
+        return {"kind": "sliding", **self.fit.provenance(), "prior_theta": list(map(float, self.prior_theta)),
+                "force_bias_world_n": [list(map(float, b)) for b in self.bias_force_n],
+                "config": asdict(self.config)}
+
+
+def identify_pushed(trials, holdout, body: PlanarBody, mu_prior: float, config: SlidingConfig,
+                    device: str = "cpu") -> PushedIdentification:
+    """Fit mu (with m and I_zz where the pushes determine them) on all trials; replay the holdout."""
+    biases = [estimate_force_bias(r, config) for r in trials]
+    windows = concat_push_windows([push_windows(r, body, config, b) for r, b in zip(trials, biases)])
+    fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=(True, config.fit_mass, True), device=device)
+    prior_theta = np.array([mu_prior, body.mass_kg, body.izz_kgm2])
+    check = windows
+    if holdout is not None:
+        check = push_windows(holdout, body, config, estimate_force_bias(holdout, config))
+    rollout = SlidingRollout(check, body, config, device)
+    metrics, paths = {}, {}
+    for name, theta in (("baseline", prior_theta), ("final", fit.theta)):
+        r = rollout.residuals(theta)
+        p, h = replay_errors(rollout, theta)
+        metrics[name] = (p, h, float(np.sum(r**2)))
+        paths[name] = rollout.trajectories(theta)
+    S = check.sample_count
+    t = (check.t_start_s[None, :] + config.sample_period_s * np.arange(S + 1)[:, None]).ravel()
+
+    def xyz(a):
+        return np.c_[a[..., :2].reshape(-1, 2), np.zeros(len(t))]
+
+    traces = {"t_s": t, "measured_position": xyz(check.measured), "baseline_position": xyz(paths["baseline"]),
+              "final_position": xyz(paths["final"]), "window_s": S * config.sample_period_s}
+    return PushedIdentification(fit, prior_theta, biases, metrics["baseline"], metrics["final"], traces, config)

@@ -132,7 +132,8 @@ def simulate_push(config: PushConfig) -> tuple[dict, PushTruth]:
     samples = int(round((config.idle_s + config.push_s + 0.5) / period)) + 1
     # pusher contact stiffness [N/m], damping near critical [N s/m]: a hard tip on a block chatters
     k_tip, c_tip = 3000.0, 2.0 * np.sqrt(3000.0 * m)
-    out = {k: [] for k in ("t_s", "position", "quat_xyzw", "force", "tip")}
+    out = {k: [] for k in ("t_s", "position", "quat_xyzw", "tip")}
+    step_force = []  # the force at every simulation step, for the sensor's averaging
     for j in range(samples):
         t = j * period
         q = state.body_q.numpy()[0].astype(float)
@@ -140,7 +141,6 @@ def simulate_push(config: PushConfig) -> tuple[dict, PushTruth]:
         out["position"].append(q[:3])
         out["quat_xyzw"].append(q[3:] / np.linalg.norm(q[3:]))
         out["tip"].append(_pusher_path(config, np.array([t]))[0])
-        mean_force = np.zeros(2)  # a sensor's anti-alias filter: the mean over the coming period
         for k in range(substeps):
             ts = t + k * config.dt_s
             q = state.body_q.numpy()[0].astype(float)
@@ -148,14 +148,17 @@ def simulate_push(config: PushConfig) -> tuple[dict, PushTruth]:
             tip = _pusher_path(config, np.array([ts, ts + config.dt_s]))
             tip_v = (tip[1] - tip[0]) / config.dt_s
             force, point = _tip_contact(q, qd, tip[0], tip_v, config, k_tip, c_tip)
-            mean_force += force / substeps
+            step_force.append(force)
             arm = np.array([point[0] - q[0], point[1] - q[1], 0.0])
             f3 = np.array([force[0], force[1], 0.0])
             state.body_f.assign(np.array([[*f3, *np.cross(arm, f3)]], dtype=np.float32))
             solver.step(state, nxt, None, contacts, config.dt_s)
             state, nxt = nxt, state
-        out["force"].append(mean_force)
     data = {k: np.asarray(v, dtype=float) for k, v in out.items()}
+    # a sensor's anti-alias filter without delay: the mean over one period centred on the stamp
+    kernel = np.ones(substeps) / substeps
+    smooth = np.stack([np.convolve(np.asarray(step_force)[:, k], kernel, "same") for k in range(2)], axis=1)
+    data["force"] = smooth[::substeps]
     return data, PushTruth(config.mu, m, izz)
 
 
