@@ -107,7 +107,7 @@ class SlidingConfig:
     jump_m: float = 0.005
     """Tracker samples further than this from a running median are dropped [m]."""
     twist_half_width: int = 3
-    max_iterations: int = 80
+    max_iterations: int = 30
     contact_sink_m: float = 3e-4
     """Static sink of the face under the object's weight [m]: sets the normal stiffness m g / sink,
     so the contact's frequency sqrt(g / sink) is the same for any mass."""

@@ -156,8 +156,8 @@ FREE = (True, False, True)
 def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction.png")) -> dict:
     """Print per-trial friction, per-block spread, and predictive validity; save the figure."""
     from pipelines.identify.sliding import (
-        SlidingConfig, SlidingRollout, concat_push_windows, estimate_force_bias, identify_sliding, push_windows,
-        quasi_static_friction, replay_errors,
+        SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
+        replay_errors,
     )
 
     bags = root / "ros2_mcap"
@@ -185,7 +185,7 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
                 "mu_qs_prior_mass": quasi_static_friction(rec, body, config, bias, body.mass_kg),
                 "bias_n": bias, "rmse_mm": 1e3 * fit.rmse_position_m,
                 "rmse_heading_deg": float(np.degrees(fit.rmse_heading_rad)), "turn_deg": _net_yaw_deg(rec),
-                "seconds": time.perf_counter() - t0, "windows_data": windows,
+                "seconds": time.perf_counter() - t0, "windows_data": windows, "theta": fit.theta,
             }
             trials.append(row)
             per_block.append(row)
@@ -198,21 +198,21 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
             "qs_cv_pct": 100 * qs.std(ddof=1) / qs.mean(), "prior_mass": body.mass_kg, "mu_prior": mu_prior,
         })
 
-        # predictive validity: fit on the odd-numbered trials, predict the even-numbered ones
+        # predictive validity: identified on the odd-numbered trials (the median of their estimates),
+        # the even-numbered ones predicted
         fit_rows, test_rows = per_block[0::2], per_block[1::2]
-        joint = identify_sliding(concat_push_windows([r["windows_data"] for r in fit_rows]), body, config,
-                                 mu_prior=mu_prior, free=FREE)
+        identified = np.median([r["theta"] for r in fit_rows], axis=0)
         prior_theta = np.array([mu_prior, body.mass_kg, body.izz_kgm2])
         for r in test_rows:
             rollout = SlidingRollout(r["windows_data"], body, config)
-            p_fit, h_fit = replay_errors(rollout, joint.theta)
+            p_fit, h_fit = replay_errors(rollout, identified)
             p_prior, h_prior = replay_errors(rollout, prior_theta)
             prediction.append({
-                "block": block.folder, "trial": r["trial"], "mu_fit": float(joint.theta[0]),
-                "mass_fit": float(joint.theta[1]), "mu_prior": mu_prior,
+                "block": block.folder, "trial": r["trial"], "mu_fit": float(identified[0]),
+                "izz_fit": float(identified[2]), "mu_prior": mu_prior,
                 "pos_mm": 1e3 * p_fit, "pos_prior_mm": 1e3 * p_prior,
                 "heading_deg": float(np.degrees(h_fit)), "heading_prior_deg": float(np.degrees(h_prior)),
-                "traj_fit": rollout.trajectories(joint.theta), "traj_prior": rollout.trajectories(prior_theta),
+                "traj_fit": rollout.trajectories(identified), "traj_prior": rollout.trajectories(prior_theta),
                 "measured": r["windows_data"].measured,
             })
 
