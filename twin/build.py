@@ -224,8 +224,8 @@ def _identify_sliding(trials, holdout, mesh_object, prior):
     scale = izz / inertia0[2, 2] if izz_known else (mass / mass0 if mass_known else 1.0)
     inertia = inertia0 * scale
     theta = Theta(
-        mass=Estimate(float(mass) if mass_known else mass0, float(mass_std), source="measured" if mass_known else "prior",
-                      prior=prior.provenance()),
+        mass=Estimate(float(mass) if mass_known else mass0, float(mass_std),
+                      source="measured" if mass_known else "prior", prior=prior.provenance()),
         com=Estimate(tuple(prior.inertial.com), (0.0, 0.0, 0.0), source="prior"),
         inertia=Estimate(tuple(map(tuple, inertia)), tuple(map(tuple, np.abs(inertia) * (izz_std / izz))),
                          source="measured" if izz_known else "prior"),

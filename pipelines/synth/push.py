@@ -107,7 +107,8 @@ def simulate_push(config: PushConfig) -> tuple[dict, PushTruth]:
     izz = m * ((2 * hx) ** 2 + (2 * hy) ** 2) / 12.0
     n = config.grid * config.grid
     ke = 2.0e4 / n
-    cfg = newton.ModelBuilder.ShapeConfig(ke=ke, kd=300.0 / n, kf=m / n / (4.0 * config.dt_s), mu=config.mu, density=0.0)
+    cfg = newton.ModelBuilder.ShapeConfig(ke=ke, kd=300.0 / n, kf=m / n / (4.0 * config.dt_s), mu=config.mu,
+                                          density=0.0)
     builder = newton.ModelBuilder(gravity=(0.0, 0.0, -GRAVITY_M_S2), up_axis=newton.Axis.Z)
     inertia = np.diag([m * ((2 * hy) ** 2 + (2 * hz) ** 2) / 12, m * ((2 * hx) ** 2 + (2 * hz) ** 2) / 12, izz])
     body = builder.add_body(mass=m, inertia=wp.mat33(inertia), lock_inertia=True)
@@ -115,8 +116,8 @@ def simulate_push(config: PushConfig) -> tuple[dict, PushTruth]:
     cells = (np.arange(config.grid) + 0.5) / config.grid * 2.0 - 1.0
     for gx in cells:
         for gy in cells:
-            builder.add_shape_sphere(body, xform=wp.transform(wp.vec3(gx * hx, gy * hy, -hz + radius), wp.quat_identity()),
-                                     radius=radius, cfg=cfg)
+            centre = wp.vec3(gx * hx, gy * hy, -hz + radius)
+            builder.add_shape_sphere(body, xform=wp.transform(centre, wp.quat_identity()), radius=radius, cfg=cfg)
     builder.add_ground_plane(cfg=cfg)
     model = builder.finalize(device="cpu")
     solver = newton.solvers.SolverSemiImplicit(model, angular_damping=0.0)
@@ -189,7 +190,8 @@ def write_push(path: Path, config: PushConfig) -> PushTruth:
     position = data["position"] + rng.normal(0, config.position_noise_m, (n, 3))
     quat = (Rotation.from_rotvec(np.c_[np.zeros((n, 2)), rng.normal(0, config.yaw_noise_rad, n)])
             * Rotation.from_quat(data["quat_xyzw"])).as_quat()
-    force = np.c_[data["force"], np.zeros(n)] + np.asarray(config.force_bias_n) + rng.normal(0, config.force_noise_n, (n, 3))
+    force = np.c_[data["force"], np.zeros(n)] + np.asarray(config.force_bias_n)
+    force = force + rng.normal(0, config.force_noise_n, (n, 3))
     tip = np.c_[data["tip"], np.full(n, config.half_extents_m[2])]
     write_recording(
         path,

@@ -79,7 +79,8 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
     print(f"prior mu = {mu_prior}; 'm free' starts from a mass prior = truth x {prior_mass_factor}; "
           f"'data' marks the parameters (mu, m, Izz) the pushes determined")
     print(f"{'seed':>4} {'mode':7} {'mu true':>7} {'mu':>6} {'mu err %':>8} {'mu*m err %':>10} {'m err %':>7} "
-          f"{'Izz err %':>9} {'data':>4} {'turn deg':>8} {'win':>3} {'mu qs':>6} {'bias err N':>10} {'rmse mm':>7} {'s':>5}")
+          f"{'Izz err %':>9} {'data':>4} {'turn deg':>8} {'win':>3} {'mu qs':>6} {'bias err N':>10} "
+          f"{'rmse mm':>7} {'s':>5}")
     for r in rows:
         flags = "".join("y" if d else "n" for d in r["determined"])
         print(f"{r['seed']:4d} {r['mode']:7} {r['mu_true']:7.3f} {r['mu']:6.3f} {r['mu_err_pct']:+8.2f} "
@@ -134,7 +135,8 @@ def read_block_trial(path: Path, block: Block):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # per-bag notes (dropouts, held transforms) are not the point here
         return read_recording(
-            path, {"pose": block.vicon_topic, "wrench": "/netft_data", "contact": "/tip_pose"}, {"contact": "base_link"},
+            path, {"pose": block.vicon_topic, "wrench": "/netft_data", "contact": "/tip_pose"},
+            {"contact": "base_link"},
             wrench_reaction=True,  # the ATI sensor reads the block's push back on the probe
         )
 
@@ -193,7 +195,8 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
         mums = np.array([r["mu_m"] for r in per_block])
         qs = np.array([r["mu_qs_prior_mass"] for r in per_block])
         summary.append({
-            "block": block.folder, "trials": len(per_block), "mu_mean": mus.mean(), "mu_cv_pct": 100 * mus.std(ddof=1) / mus.mean(),
+            "block": block.folder, "trials": len(per_block), "mu_mean": mus.mean(),
+            "mu_cv_pct": 100 * mus.std(ddof=1) / mus.mean(),
             "mu_m_cv_pct": 100 * mums.std(ddof=1) / mums.mean(), "qs_mean": qs.mean(),
             "qs_cv_pct": 100 * qs.std(ddof=1) / qs.mean(), "prior_mass": body.mass_kg, "mu_prior": mu_prior,
         })
@@ -228,7 +231,8 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
               f"{r['windows']:3d} {r['mu_qs_prior_mass']:6.3f} {r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} "
               f"{r['rmse_heading_deg']:8.2f} {r['seconds']:5.1f}")
     print("\nper block:")
-    print(f"{'block':14} {'trials':>6} {'prior m kg':>10} {'mu prior':>8} {'mu mean':>7} {'mu CV %':>7} {'mu*m CV %':>9} "
+    print(f"{'block':14} {'trials':>6} {'prior m kg':>10} {'mu prior':>8} {'mu mean':>7} {'mu CV %':>7} "
+          f"{'mu*m CV %':>9} "
           f"{'qs mean':>7} {'qs CV %':>7}")
     for s in summary:
         print(f"{s['block']:14} {s['trials']:6d} {s['prior_mass']:10.3f} {s['mu_prior']:8.3f} {s['mu_mean']:7.3f} "
@@ -329,7 +333,8 @@ def bench_push_mit(root: Path = DATA) -> list[dict]:
         windows = push_windows(rec, body, config, bias)
         fit = identify_sliding(windows, body, config, mu_prior=0.35, free=(True, False, False))
         rows.append({"trial": path.name, "mass": spec["mass_kg"], "mu": float(fit.theta[0]),
-                     "mu_std": float(fit.std[0]), "mu_qs": quasi_static_friction(rec, body, config, bias, spec["mass_kg"]),
+                     "mu_std": float(fit.std[0]),
+                     "mu_qs": quasi_static_friction(rec, body, config, bias, spec["mass_kg"]),
                      "windows": fit.window_count, "rmse_mm": 1e3 * fit.rmse_position_m,
                      "rmse_deg": float(np.degrees(fit.rmse_heading_rad)), "turn_deg": _net_yaw_deg(rec)})
     print("MIT pushing dataset, JSON trial(s), mass and I_zz known (objects.json):")
