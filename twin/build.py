@@ -212,9 +212,11 @@ def _identify_sliding(trials, holdout, mesh_object, prior):
 
     inertia0 = np.asarray(prior.inertial.inertia, dtype=float)
     mass0 = float(prior.inertial.mass)
-    mass_rel = float(np.log(prior.upper[0] / prior.lower[0]) / 4)  # the bounds as about +-2 std
+    # the bounds C as about +-2 std of the log (lower/upper: mass, COM x y z, Ixx Iyy Izz)
+    mass_rel = float(np.log(prior.upper[0] / prior.lower[0]) / 4)
+    izz_rel = float(np.log(prior.upper[6] / prior.lower[6]) / 4)
     body = PlanarBody(tuple(0.5 * (mesh_object.bounds[1] - mesh_object.bounds[0])), mass0, float(inertia0[2, 2]),
-                      mass_rel_std=mass_rel, izz_rel_std=mass_rel)
+                      mass_rel_std=mass_rel, izz_rel_std=izz_rel)
     config = SlidingConfig()
     pushed = identify_pushed(trials, holdout, body, float(prior.friction_kinetic[0]), config)
     fit = pushed.fit
