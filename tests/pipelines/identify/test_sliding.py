@@ -73,14 +73,15 @@ def test_force_bias_read_from_the_quiet_start(push_recording):
 
 
 def test_friction_recovered_from_a_turning_push(push_recording):
-    """mu within 5 % from a push that turns the block, its mass prior 20 % off."""
+    """mu within 5 % from a push that turns the block, the mass known and its prior friction 40 % off."""
     rec, config = push_recording
     sliding = SlidingConfig()
-    windows = push_windows(rec, _box(0.7 * 1.2), sliding, estimate_force_bias(rec, sliding))
-    fit = identify_sliding(windows, _box(0.7 * 1.2), sliding, mu_prior=0.5)
-    assert fit.theta[0] == pytest.approx(0.35, rel=0.05)
-    assert fit.determined[0]
-    assert fit.rmse_position_m < 1e-3
+    bias = estimate_force_bias(rec, sliding)
+    known = identify_sliding(push_windows(rec, _box(0.7), sliding, bias), _box(0.7), sliding, mu_prior=0.5,
+                             free=(True, False, True))
+    assert known.theta[0] == pytest.approx(0.35, rel=0.05)
+    assert known.determined[0] and not known.determined[1]
+    assert known.rmse_position_m < 1e-3
 
 
 def test_push_without_contact_topic_names_the_file(tmp_path):
