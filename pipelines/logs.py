@@ -71,7 +71,7 @@ _TF_TOPICS = ("/tf", "/tf_static")
 _ROLE_TYPES = {
     "pose": POSE_TYPES,
     "wrench": (WRENCH_TYPE,),
-    "contact": (POINT_TYPE,),
+    "contact": (POINT_TYPE, *POSE_TYPES),  # a pose's origin serves as the point (e.g. a pusher tip)
     "joint": (JOINT_TYPE,),
 }
 _QUAT_NORM_TOL = 1e-6
@@ -618,13 +618,17 @@ def _wrench_samples(path: Path, d: _Decoded) -> tuple[np.ndarray, np.ndarray, np
     return np.asarray(t, dtype=float), np.asarray(f, dtype=float), np.asarray(tau, dtype=float), frames
 
 
-def _point_track(path: Path, d: _Decoded) -> PointTrack | None:
+def _point_track(path: Path, d: _Decoded, frame_if_empty: str = "") -> PointTrack | None:
+    """Points of a PointStamped topic, or the origins of a pose topic's poses."""
+    if d.type != POINT_TYPE:
+        track, recorded = _pose_track(path, d)
+        return PointTrack(track.t_s, track.position, recorded or frame_if_empty, d.topic)
     t, p, frames = [], [], []
     for log_ns, m in d.items:
         header = _get(m, "header")
         t.append(_stamp_s(_get(header, "stamp"), log_ns))
         p.append(_xyz(_get(m, "point")))
-        frames.append(_frame(_get(header, "frame_id")))
+        frames.append(_frame(_get(header, "frame_id")) or frame_if_empty)
     if not t:
         return None
     frame, mask = _dominant(path, d.topic, frames)
@@ -769,13 +773,32 @@ def _choose(path: Path, role: str, candidates: list[_Decoded], rank: Callable[[_
     return best
 
 
-def read_recording(path: Path, topics: dict[str, str] | None = None) -> Recording:
+def read_recording(
+    path: Path,
+    topics: dict[str, str] | None = None,
+    frames: dict[str, str] | None = None,
+    wrench_rotation_xyzw: tuple[float, float, float, float] | None = None,
+    wrench_reaction: bool = False,
+) -> Recording:
     """Read one trial from an MCAP file (or a rosbag2 directory holding one).
 
     Args:
         path: the .mcap file.
         topics: role overrides {"pose" | "wrench" | "contact" | "joint": "/topic"};
             other roles are found by message type (DESIGN.md, "Logs: MCAP").
+            A contact topic may also be a pose topic (e.g. a pusher tip's
+            PoseStamped): its origin is the contact point.
+        frames: {"wrench" | "contact": frame id} for messages whose header has
+            an empty frame_id (recorders often leave it empty); resolved
+            through the tracked pose and /tf like any recorded frame.
+        wrench_rotation_xyzw: a fixed rotation of the wrench messages' axes in
+            world (sensor-to-world), for recordings whose sensor frame is not
+            in /tf. The wrench then acts at the contact point when a contact
+            topic exists, else at the tracked frame's origin, as a world
+            wrench does.
+        wrench_reaction: the messages give the wrench ON the sensor (the
+            object's reaction, as a tool-mounted F/T sensor reports it, e.g. the
+            MIT pushing bags); it is negated to the wrench applied TO the object.
 
     Returns:
         A Recording whose `wrench` is in world axes with its torque about the
@@ -785,14 +808,25 @@ def read_recording(path: Path, topics: dict[str, str] | None = None) -> Recordin
         LogError: file missing, not MCAP, truncated or corrupt; no pose or wrench
             topic; an override naming an absent topic or a wrong type; a wrench
             frame that cannot be resolved to world.
-        ValueError: an unknown role in `topics`.
+        ValueError: an unknown role in `topics` or `frames`, or a rotation that
+            is not a unit quaternion.
     """
     from mcap_ros2.decoder import DecoderFactory
 
     topics = dict(topics or {})
+    frames = dict(frames or {})
     for role in topics:
         if role not in ROLES:
             raise ValueError(f"topics: unknown role {role!r}, expected one of {ROLES}")
+    for role in frames:
+        if role not in ("wrench", "contact"):
+            raise ValueError(f"frames: unknown role {role!r}, expected 'wrench' or 'contact'")
+    fixed_rotation = None
+    if wrench_rotation_xyzw is not None:
+        q = np.asarray(wrench_rotation_xyzw, dtype=float)
+        if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 1e-6:
+            raise ValueError(f"wrench_rotation_xyzw: expected a unit quaternion (x, y, z, w), got {wrench_rotation_xyzw!r}")
+        fixed_rotation = Rotation.from_quat(q)
     path = _resolve_file(Path(path))
     overridden = set(topics.values())
     accepted = set(POSE_TYPES) | {WRENCH_TYPE, POINT_TYPE, JOINT_TYPE, TF_TYPE}
@@ -832,6 +866,7 @@ def read_recording(path: Path, topics: dict[str, str] | None = None) -> Recordin
             raise LogError(f"{path}: no wrench topic ({WRENCH_TYPE})")
         wrench_d = _choose(path, "wrench", cands, lambda d: (len(d.items),))
     t_w, f_w, tau_w, frames_w = _wrench_samples(path, wrench_d)
+    frames_w = [f or frames.get("wrench", "") for f in frames_w]
     wrench_frame, mask = _dominant(path, wrench_d.topic, frames_w)
     t_w, (f_w, tau_w) = _clean(path, wrench_d.topic, t_w[mask], [f_w[mask], tau_w[mask]])
     wrench_raw = WrenchTrack(t_w, f_w, tau_w, wrench_d.topic, wrench_frame)
@@ -840,7 +875,7 @@ def read_recording(path: Path, topics: dict[str, str] | None = None) -> Recordin
     if "pose" in topics:
         pose, _ = _pose_track(path, decoded[topics["pose"]])
     else:
-        cands = of_type(POSE_TYPES, exclude=_TF_TOPICS)
+        cands = of_type(POSE_TYPES, exclude=(*_TF_TOPICS, topics.get("contact")))
         if not cands:
             raise LogError(f"{path}: no pose topic ({', '.join(POSE_TYPES)})")
         tracks = {d.topic: _pose_track(path, d) for d in cands}
@@ -859,9 +894,11 @@ def read_recording(path: Path, topics: dict[str, str] | None = None) -> Recordin
     # contact and joints (optional)
     contact = None
     if "contact" in topics:
-        contact = _point_track(path, decoded[topics["contact"]])
+        contact = _point_track(path, decoded[topics["contact"]], frames.get("contact", ""))
     elif cands := of_type((POINT_TYPE,)):
-        contact = _point_track(path, _choose(path, "contact", cands, lambda d: (len(d.items),)))
+        contact = _point_track(
+            path, _choose(path, "contact", cands, lambda d: (len(d.items),)), frames.get("contact", "")
+        )
     joints = None
     if "joint" in topics:
         joints = _joint_track(path, decoded[topics["joint"]])
@@ -892,14 +929,18 @@ def read_recording(path: Path, topics: dict[str, str] | None = None) -> Recordin
 
     if contact is not None and contact.frame_id not in (world, "world"):
         r_c, o_c = world_from(contact.frame_id, contact.t_s, f"contact topic {contact.topic}")
-        contact = PointTrack(contact.t_s, o_c + r_c.apply(contact.position), world, contact.topic)
+        contact = PointTrack(contact.t_s, o_c + r_c.apply(np.array(contact.position)), world, contact.topic)
     elif contact is not None:
         contact = PointTrack(contact.t_s, contact.position, world, contact.topic)
 
-    r_wf, p_frame = world_from(wrench_frame, t_w, f"wrench topic {wrench_d.topic}")
-    if (wrench_frame == world or wrench_frame == "world") and contact is not None:
+    acts_as_world = fixed_rotation is not None or wrench_frame in (world, "world")
+    if fixed_rotation is not None:
+        r_wf = Rotation.from_quat(np.tile(fixed_rotation.as_quat(), (len(t_w), 1)))
+    else:
+        r_wf, p_frame = world_from(wrench_frame, t_w, f"wrench topic {wrench_d.topic}")
+    if acts_as_world and contact is not None:
         p_frame = _interp_linear(contact.t_s, contact.position, t_w)  # world wrench acts at the contact
-    elif wrench_frame == world or wrench_frame == "world":
+    elif acts_as_world:
         p_frame = None  # acts at the tracked frame's origin
     for e in edges:
         if e.extrapolated:
@@ -909,8 +950,9 @@ def read_recording(path: Path, topics: dict[str, str] | None = None) -> Recordin
                 stacklevel=2,
             )
             e.extrapolated = 0
-    force = r_wf.apply(f_w)
-    torque = r_wf.apply(tau_w)
+    sign = -1.0 if wrench_reaction else 1.0
+    force = sign * r_wf.apply(f_w)
+    torque = sign * r_wf.apply(tau_w)
     if p_frame is not None:
         p_track, _ = pose.interpolate(t_w)
         torque = torque + np.cross(p_frame - p_track, force)

@@ -43,6 +43,20 @@ class BuildConfig:
     vlm_model: str | None = None
     kind: Literal["free", "sliding", "prismatic", "revolute"] | None = None
     base_mesh: Path | None = None
+    topics: tuple[tuple[str, str], ...] = ()
+    """(role, topic) overrides for reading the recordings."""
+    frames: tuple[tuple[str, str], ...] = ()
+    """(role, frame id) for wrench or contact messages whose header leaves it empty."""
+    wrench_rotation_xyzw: tuple[float, float, float, float] | None = None
+    wrench_reaction: bool = False
+    """The wrench messages give the force on the sensor (the object's reaction): negate them."""
+
+    def read(self, path: Path):
+        """One recording, read with this build's topic, frame and rotation options."""
+        from pipelines.logs import read_recording
+
+        return read_recording(path, dict(self.topics), dict(self.frames), self.wrench_rotation_xyzw,
+                              self.wrench_reaction)
 
 
 @dataclass
@@ -70,7 +84,6 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     from exporters import export_all
     from pipelines.decompose import DecomposeConfig, decompose
     from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
-    from pipelines.logs import read_recording
     from pipelines.priors import VlmConfig, ask_vlm, describe_object, estimate_prior, scan_image
     from pipelines.validate import validate_exports
 
@@ -81,14 +94,14 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     if config.vlm and not config.vlm_model:
         raise BuildError(f"--vlm {config.vlm} needs --vlm-model NAME")
     for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
-        if not Path(path).is_file():
+        if not Path(path).exists():
             raise BuildError(f"{path}: recording not found")
     if config.base_mesh and not Path(config.base_mesh).is_file():
         raise BuildError(f"{config.base_mesh}: base mesh not found")
 
     # Recordings are read first: they are quick, and a bad file should fail before minutes of geometry.
-    trials = [timer.run(f"logs {p.name}", read_recording, p) for p in config.logs]
-    holdout = timer.run(f"logs {config.holdout.name}", read_recording, config.holdout) if config.holdout else None
+    trials = [timer.run(f"logs {p.name}", config.read, p) for p in config.logs]
+    holdout = timer.run(f"logs {config.holdout.name}", config.read, config.holdout) if config.holdout else None
     from pipelines.identify.kind import detect_kind
 
     detection = timer.run("kind", detect_kind, trials[0], config.kind)
@@ -117,30 +130,42 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         return build_jointed(config, trials, holdout, detection, mesh_object, placement, parts, prior, name,
                              scan_stats, timer, log, t_start)
 
-    X_tracked_body = tracked_to_object(trials[0], placement)
-    id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations,
-                               optimizer=config.optimizer)
-    held = timer.run(
-        "identify", identify_held, trials, holdout, X_tracked_body, prior.inertial,
-        InertialBounds(prior.lower, prior.upper), id_config, config.method, _progress_logger(log),
-    )
-    if held.selected != config.method and config.method == "newton":
-        log("least squares predicts the held-out recording's impulses better than the Newton fit: keeping it")
-    inertial, covariance = held.inertial, held.covariance
-    fit_baseline, fit_final = held.fits["baseline"], held.fits[held.selected]
+    if detection.kind == "sliding":
+        theta, fit, identify_provenance, loss_history, traces = timer.run(
+            "identify", _identify_sliding, trials, holdout, mesh_object, prior
+        )
+    else:
+        X_tracked_body = tracked_to_object(trials[0], placement)
+        id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations,
+                                   optimizer=config.optimizer)
+        held = timer.run(
+            "identify", identify_held, trials, holdout, X_tracked_body, prior.inertial,
+            InertialBounds(prior.lower, prior.upper), id_config, config.method, _progress_logger(log),
+        )
+        if held.selected != config.method and config.method == "newton":
+            log("least squares predicts the held-out recording's impulses better than the Newton fit: keeping it")
+        inertial, covariance = held.inertial, held.covariance
+        fit_baseline, fit_final = held.fits["baseline"], held.fits[held.selected]
 
-    std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
-    inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])
-    ci = lambda v, s: (np.asarray(v) - 1.96 * np.asarray(s), np.asarray(v) + 1.96 * np.asarray(s))  # noqa: E731
-    theta = Theta(
-        mass=Estimate(inertial.mass, std[0], interval95=ci(inertial.mass, std[0]), prior=prior.provenance()),
-        com=Estimate(inertial.com, tuple(std[1:4]), interval95=ci(inertial.com, std[1:4])),
-        inertia=Estimate(inertial.inertia, inertia_std, interval95=ci(inertial.inertia, inertia_std)),
-        friction=Estimate(
-            prior.friction[0], (prior.friction[2] - prior.friction[1]) / 4, source="prior",
-            interval95=(prior.friction[1], prior.friction[2]),
-        ),
-    )
+        std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+        inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])
+        ci = lambda v, s: (np.asarray(v) - 1.96 * np.asarray(s), np.asarray(v) + 1.96 * np.asarray(s))  # noqa: E731
+        theta = Theta(
+            mass=Estimate(inertial.mass, std[0], interval95=ci(inertial.mass, std[0]), prior=prior.provenance()),
+            com=Estimate(inertial.com, tuple(std[1:4]), interval95=ci(inertial.com, std[1:4])),
+            inertia=Estimate(inertial.inertia, inertia_std, interval95=ci(inertial.inertia, inertia_std)),
+            friction=Estimate(
+                prior.friction[0], (prior.friction[2] - prior.friction[1]) / 4, source="prior",
+                interval95=(prior.friction[1], prior.friction[2]),
+            ),
+        )
+        fit = Fit(fit_baseline, fit_final, id_config.window_s)
+        loss_history, traces = held.loss_history, held.traces
+        identify_provenance = {
+            "identify": {"method": config.method, **held.provenance()},
+            "tracked_frame_in_object": {"position": list(X_tracked_body.inverse().position),
+                                        "quaternion_xyzw": list(X_tracked_body.inverse().quaternion_xyzw)},
+        }
 
     out = Path(config.output)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -155,12 +180,12 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             collision.append(rel)
         asset = Asset(
             name=name,
-            kind="free",
+            kind=config.kind,
             placement=placement,
             theta=theta,
             geometry=Geometry("meshes/visual.obj", tuple(collision)),
-            material=Material(material.name, float(inertial.mass / mesh_object.volume), prior.friction[0]),
-            fit=Fit(fit_baseline, fit_final, id_config.window_s),
+            material=Material(material.name, float(theta.mass.value / mesh_object.volume), theta.friction.value),
+            fit=fit,
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), "report": "report.html"}
@@ -170,9 +195,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             "scan": scan_stats,
             "decompose": parts.stats | {"volume_union_m3": parts.volume_union_m3, "volume_mesh_m3": parts.volume_mesh_m3},
             "prior": prior.provenance(),
-            "identify": {"method": config.method, **held.provenance()},
-            "tracked_frame_in_object": {"position": list(X_tracked_body.inverse().position),
-                                        "quaternion_xyzw": list(X_tracked_body.inverse().quaternion_xyzw)},
+            **identify_provenance,
             "validation": validation.to_json(),
             "timings_s": timer.seconds | {"total": time.perf_counter() - t_start},
         }
@@ -180,13 +203,51 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         write_asset(asset, tmp / "asset.json")
         from twin.report import write_report
 
-        write_report(tmp / "report.html", asset_to_json(asset), held.loss_history, held.traces)
+        write_report(tmp / "report.html", asset_to_json(asset), loss_history, traces)
         _replace_dir(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     log(f"wrote {out}/ in {time.perf_counter() - t_start:.1f} s")
     return out
+
+
+def _identify_sliding(trials, holdout, mesh_object, prior):
+    """Friction of a pushed object, with mass and yaw inertia where the pushes determine them.
+
+    The support face is the mesh's bounding box bottom (object frame, axes parallel to
+    world at the scan). What the pushes leave undetermined keeps the prior's value and
+    is marked "prior"; COM and the tilting moments always are.
+    """
+    from assets import Estimate, Fit, FitMetrics, Theta
+    from pipelines.identify.sliding import PlanarBody, SlidingConfig, identify_pushed
+
+    inertia0 = np.asarray(prior.inertial.inertia, dtype=float)
+    mass0 = float(prior.inertial.mass)
+    # the bounds C as about +-2 std of the log (lower/upper: mass, COM x y z, Ixx Iyy Izz)
+    mass_rel = float(np.log(prior.upper[0] / prior.lower[0]) / 4)
+    izz_rel = float(np.log(prior.upper[6] / prior.lower[6]) / 4)
+    body = PlanarBody(tuple(0.5 * (mesh_object.bounds[1] - mesh_object.bounds[0])), mass0, float(inertia0[2, 2]),
+                      mass_rel_std=mass_rel, izz_rel_std=izz_rel)
+    config = SlidingConfig()
+    pushed = identify_pushed(trials, holdout, body, float(prior.friction_kinetic[0]), config)
+    fit = pushed.fit
+    (mu, mass, izz), (mu_std, mass_std, izz_std) = fit.theta, fit.std
+    _, mass_known, izz_known = fit.determined
+    # one tensor scale keeps it physically consistent: Izz's if the pushes determined it, else the mass's
+    scale = izz / inertia0[2, 2] if izz_known else (mass / mass0 if mass_known else 1.0)
+    inertia = inertia0 * scale
+    theta = Theta(
+        mass=Estimate(float(mass) if mass_known else mass0, float(mass_std),
+                      source="measured" if mass_known else "prior", prior=prior.provenance()),
+        com=Estimate(tuple(prior.inertial.com), (0.0, 0.0, 0.0), source="prior"),
+        inertia=Estimate(tuple(map(tuple, inertia)), tuple(map(tuple, np.abs(inertia) * (izz_std / izz))),
+                         source="measured" if izz_known else "prior"),
+        friction=Estimate(float(mu), float(mu_std), interval95=(float(mu - 1.96 * mu_std), float(mu + 1.96 * mu_std))),
+    )
+    metrics = {k: FitMetrics(*v) for k, v in (("baseline", pushed.baseline), ("final", pushed.final))}
+    return (theta, Fit(metrics["baseline"], metrics["final"], config.window_s), {"identify": pushed.provenance()},
+            fit.loss_history, pushed.traces)
 
 
 def _object_mesh(config: BuildConfig):

@@ -41,9 +41,27 @@ class Build:
     vlm_model: str | None = None
     """Model name on the --vlm server (an image-capable one)."""
     kind: Literal["free", "sliding", "prismatic", "revolute"] | None = None
-    """Kind of interaction; default: chosen from the first recording's motion by BIC."""
+    """free: held and moved through the air; sliding: pushed across a support surface; prismatic,
+    revolute: a drawer or door part on its joint. Default: chosen from the first recording's motion by BIC."""
     base_mesh: Path | None = None
     """Drawers and doors: mesh of the fixed base (world frame, metres), written with the part."""
+    topic: tyro.conf.UseAppendAction[tuple[str, ...]] = ()
+    """ROLE=/name: the topic for a role (pose, wrench, contact, joint); repeat per role.
+    A contact topic may be a PoseStamped (its origin is the point, e.g. a pusher tip)."""
+    frame: tyro.conf.UseAppendAction[tuple[str, ...]] = ()
+    """ROLE=frame_id: the frame of wrench or contact messages whose header leaves it empty."""
+    wrench_rotation: tuple[float, float, float, float] | None = None
+    """Fixed sensor-to-world rotation of the wrench messages, quaternion x y z w (when the sensor frame is not in /tf)."""
+    wrench_reaction: bool = False
+    """The wrench messages give the force ON the sensor (a tool-mounted F/T sensor's reading): negate it."""
+
+
+@dataclass(frozen=True)
+class Inspect:
+    """List an MCAP recording's topics with their types, message counts, rates and time spans."""
+
+    file: tyro.conf.Positional[Path]
+    """The .mcap file (or a rosbag2 directory holding one)."""
 
 
 @dataclass(frozen=True)
@@ -73,9 +91,11 @@ class Bench:
     crlb: spread of the estimates over --draws noise draws against the Cramer-Rao bound.
     mujoco: paper's recordings identified by mujoco.sysid (pseudo-inertia) and by ours, side by side.
     reconstruct: scans of real meshes and primitives (3-30 cm, two noise levels) against their truth; real Kinect frames.
+    push: synthetic pushes with known friction (--seeds of them): friction, mass and yaw inertia errors.
+    push-real: the MIT block pushes: friction per trial and its spread, quasi-static estimate, predictive validity.
     """
 
-    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct"]]
+    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct", "push", "push-real"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -110,9 +130,35 @@ def _run_build(args: Build) -> None:
             name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
             optimizer=args.optimizer,
             vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind, base_mesh=args.base_mesh,
+            topics=_role_map(args.topic, "--topic"), frames=_role_map(args.frame, "--frame"),
+            wrench_rotation_xyzw=args.wrench_rotation, wrench_reaction=args.wrench_reaction,
         ),
         log=_log,
     )
+
+
+def _role_map(items: tuple[str, ...], flag: str) -> tuple[tuple[str, str], ...]:
+    """ROLE=value options as (role, value) pairs; a malformed one is a ValueError naming it."""
+    pairs = []
+    for item in items:
+        role, sep, value = item.partition("=")
+        if not sep or not role or not value:
+            raise ValueError(f"{flag} {item!r}: expected ROLE=VALUE, e.g. {flag} wrench=/netft_data")
+        pairs.append((role, value))
+    return tuple(pairs)
+
+
+def _run_inspect(args: Inspect) -> None:
+    from pipelines.logs import inspect_recording
+
+    rows = inspect_recording(args.file)
+    width = max([len("topic")] + [len(r.topic) for r in rows])
+    type_width = max([len("type")] + [len(r.type) for r in rows])
+    print(f"{args.file}")
+    print(f"{'topic':<{width}}  {'type':<{type_width}}  {'count':>7}  {'rate Hz':>8}  {'start s':>16}  {'span s':>8}")
+    for r in rows:
+        print(f"{r.topic:<{width}}  {r.type:<{type_width}}  {r.count:>7}  {r.rate_hz:>8.2f}  "
+              f"{r.t_start_s:>16.3f}  {r.t_end_s - r.t_start_s:>8.3f}")
 
 
 def _run_synth(args: Synth) -> None:
@@ -144,10 +190,12 @@ def main(argv: list[str] | None = None) -> int:
 
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # no per-module load lines in the progress log
-    command = tyro.extras.subcommand_cli_from_dict({"build": Build, "synth": Synth, "bench": Bench}, args=argv)
+    command = tyro.extras.subcommand_cli_from_dict({"build": Build, "inspect": Inspect, "synth": Synth, "bench": Bench}, args=argv)
     try:
         if isinstance(command, Build):
             _run_build(command)
+        elif isinstance(command, Inspect):
+            _run_inspect(command)
         elif isinstance(command, Synth):
             _run_synth(command)
         else:
@@ -171,6 +219,14 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.reconstruct import bench_reconstruct
 
                 bench_reconstruct(quick=command.quick)
+            elif command.what == "push":
+                from twin.bench.push import bench_push
+
+                bench_push(command.seeds)
+            elif command.what == "push-real":
+                from twin.bench.push import bench_push_real
+
+                bench_push_real()
             elif command.what == "priors":
                 from twin.bench.priors import bench_priors
 

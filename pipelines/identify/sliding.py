@@ -1,0 +1,707 @@
+"""Pushed objects: surface friction (with mass and yaw inertia where the data determine them).
+
+An object pushed across a support surface is simulated in Newton with
+SemiImplicit and its collision pipeline, gradients from a Warp tape: one world
+per shooting window, each started from the measured planar state (x, y, yaw and
+their rates), driven by the measured pusher force applied at the measured
+contact point, compared with the measured motion.
+
+The support face is sampled by a grid of point contacts (small spheres, uniform
+pressure). A box's own collision shape touches a plane at its four corners,
+which puts all the friction at the largest radius and roughly doubles the
+friction torque that resists turning; a 4 x 4 grid gets the mean lever arm of a
+uniformly loaded square within 2 %.
+
+Penalty friction in Newton is viscous below a slip speed (kf |v_t| < mu f_n)
+and Coulomb above; its gradient w.r.t. mu is zero in the viscous branch, so
+only windows in which the object slides are fitted (newton.md, "sticking").
+
+Parameters are theta = (mu, m [kg], I_zz [kg m^2]). Pushes that are nearly
+quasi-static determine mu * m (force balance) better than either alone; a
+log-normal prior on m and I_zz closes the problem, and each parameter whose
+curvature from the data is below the prior's is reported as taken from the prior.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+from scipy.spatial.transform import Rotation
+
+from .windows import local_twist, lowpass
+
+__all__ = [
+    "PlanarBody",
+    "PushWindows",
+    "SlidingConfig",
+    "SlidingFit",
+    "SlidingRollout",
+    "PushedIdentification",
+    "concat_push_windows",
+    "estimate_force_bias",
+    "identify_pushed",
+    "identify_sliding",
+    "replay_errors",
+    "push_windows",
+    "quasi_static_friction",
+]
+
+GRAVITY_M_S2 = 9.81
+_GRID = 4  # contacts per side of the support face
+
+
+@dataclass(frozen=True)
+class PlanarBody:
+    """The pushed object as the simulation sees it (object frame at the COM, z up).
+
+    half_extents_m: half sizes of its bounding box (x, y, z) [m]; the support
+        face is the box's bottom face.
+    mass_kg, izz_kgm2: prior values (inertia about the vertical axis through the COM).
+    mass_rel_std, izz_rel_std: prior spread, as the std of the log.
+    """
+
+    half_extents_m: tuple[float, float, float]
+    mass_kg: float
+    izz_kgm2: float
+    mass_rel_std: float = 0.3
+    izz_rel_std: float = 0.3
+
+    def __post_init__(self):
+        h = np.asarray(self.half_extents_m, dtype=float)
+        if h.shape != (3,) or not np.all(h > 0):
+            raise ValueError(f"PlanarBody.half_extents_m: expected three positive sizes [m], got {self.half_extents_m}")
+        for name in ("mass_kg", "izz_kgm2", "mass_rel_std", "izz_rel_std"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"PlanarBody.{name}: expected > 0, got {getattr(self, name)!r}")
+
+
+@dataclass(frozen=True)
+class SlidingConfig:
+    """Settings of the sliding identification (recorded in asset.json provenance).
+
+    window_s: shooting-window length [s]. dt_s: simulation step [s].
+    moving_speed_m_s: a window is fitted only if the object's median speed in it
+        exceeds this (sliding, not sticking) [m/s].
+    contact_margin_m: the pusher counts as touching when the contact point lies
+        within the support face's circumradius plus this [m].
+    yaw_length_m: heading errors are weighted as arc lengths at this radius
+        (default: the face's half diagonal) [m].
+    mu_bounds: admissible friction coefficients.
+    smoothing_hz: zero-phase low-pass of the poses when finding the first motion (bias).
+    twist_half_width: samples each side of a window's start in the quadratic fit
+        of its start velocity.
+    max_iterations: L-BFGS-B iterations.
+    """
+
+    window_s: float = 0.3
+    dt_s: float = 2e-3
+    moving_speed_m_s: float = 0.01
+    contact_margin_m: float = 0.02
+    yaw_length_m: float | None = None
+    mu_bounds: tuple[float, float] = (0.02, 2.0)
+    smoothing_hz: float = 10.0
+    sample_period_s: float = 0.01
+    """Pose samples are resampled to this period [s], so windows of any recording share one batch."""
+    jump_m: float = 0.005
+    """Tracker samples further than this from a running median are dropped [m]."""
+    twist_half_width: int = 3
+    max_iterations: int = 30
+    contact_sink_m: float = 3e-4
+    """Static sink of the face under the object's weight [m]: sets the normal stiffness m g / sink,
+    so the contact's frequency sqrt(g / sink) is the same for any mass."""
+    contact_damping_ratio: float = 0.7
+    fit_mass: bool = False
+    """Fit the mass too. Pushes determine mu m through the force balance; the split rests on the
+    accelerations, which 5 ms of force-to-pose timing error moves by about 10 % (twin bench push),
+    so by default the mass keeps its prior (marked so) and mu is measured given it."""
+
+
+@dataclass(frozen=True)
+class PushWindows:
+    """W planar windows of S pose samples each, sample 0 the start.
+
+    dt_s, substeps: simulation step [s] and steps per pose sample.
+    t_start_s [W]; start [W, 6]: x, y [m], yaw [rad], vx, vy [m/s], yaw rate [rad/s];
+    force [steps, W, 2]: pusher force on the object, world x, y [N] (bias removed);
+    contact [steps, W, 2]: its point of application, world x, y [m];
+    measured [S+1, W, 3]: x, y [m], yaw [rad] (continuous, not wrapped).
+    """
+
+    dt_s: float
+    substeps: int
+    t_start_s: np.ndarray
+    start: np.ndarray
+    force: np.ndarray
+    contact: np.ndarray
+    measured: np.ndarray
+
+    @property
+    def window_count(self) -> int:
+        return len(self.t_start_s)
+
+    @property
+    def step_count(self) -> int:
+        return self.force.shape[0]
+
+    @property
+    def sample_count(self) -> int:
+        return self.measured.shape[0] - 1
+
+
+def _planar_grid(recording, config: "SlidingConfig", smooth: bool):
+    """Pose track on a uniform grid of config.sample_period_s: t [s], xy [m], yaw [rad, unwrapped].
+
+    Tracker jumps (samples off a running median by more than config.jump_m, or
+    config.jump_m / 0.05 m in heading) are dropped first; with `smooth`, the
+    result is low-passed at config.smoothing_hz.
+    """
+    from scipy.signal import medfilt
+
+    pose = recording.pose
+    t = pose.t_s
+    xy_raw = pose.position[:, :2]
+    yaw_raw = np.unwrap(_yaw(pose.quat_xyzw))
+    if len(t) > 9:
+        off_xy = np.linalg.norm(xy_raw - np.stack([medfilt(xy_raw[:, k], 9) for k in range(2)], axis=1), axis=1)
+        wrapped = np.angle(np.exp(1j * (yaw_raw - medfilt(yaw_raw, 9))))
+        keep = (off_xy < config.jump_m) & (np.abs(wrapped) < config.jump_m / 0.05)
+        t, xy_raw = t[keep], xy_raw[keep]
+        yaw_raw = np.unwrap(yaw_raw[keep])
+    period = config.sample_period_s
+    grid = t[0] + period * np.arange(int(np.floor((t[-1] - t[0]) / period)) + 1)
+    xy = np.stack([np.interp(grid, t, xy_raw[:, k]) for k in range(2)], axis=1)
+    yaw = np.interp(grid, t, yaw_raw)
+    if smooth:
+        xy = lowpass(xy, config.smoothing_hz, 1 / period)
+        yaw = lowpass(yaw[:, None], config.smoothing_hz, 1 / period)[:, 0]
+    return grid, xy, yaw
+
+
+def _yaw(quat_xyzw: np.ndarray) -> np.ndarray:
+    """Heading of the frame's x axis about world z [rad] (valid while the object stays flat)."""
+    x_axis = Rotation.from_quat(quat_xyzw).apply([1.0, 0.0, 0.0])
+    return np.arctan2(x_axis[:, 1], x_axis[:, 0])
+
+
+def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3) -> np.ndarray:
+    """Constant offset of the measured force, world x, y, z [N]: its median before the object first moves.
+
+    Samples up to `margin_s` before the first sustained motion are left out (the
+    pusher may already press while friction holds). The F/T sensors of real bags
+    are often not zeroed (mit-push README). Zeros when there is no such interval.
+    """
+    grid, xy, _ = _planar_grid(recording, config, smooth=True)
+    speed = np.linalg.norm(np.gradient(xy, grid, axis=0), axis=1)
+    run = 10  # samples: a filter's edge or a tracker glitch is not motion
+    fast = (speed > config.moving_speed_m_s).astype(float)
+    moving = np.flatnonzero(np.convolve(fast, np.ones(run), "valid") == run)
+    t_w = recording.wrench.t_s
+    quiet = t_w < (grid[moving[0]] if len(moving) else grid[-1]) - margin_s
+    if quiet.sum() < 10:
+        return np.zeros(3)
+    return np.median(recording.wrench.force[quiet], axis=0)
+
+
+def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: np.ndarray | None = None,
+                 moving_only: bool = True) -> PushWindows:
+    """Back-to-back windows over the part of `recording` where the pusher touches the object.
+
+    The force is the recording's world-axes wrench force minus `bias`; the contact
+    point is the recording's contact track (required: a push is a force at a point).
+    With moving_only, windows where the object does not slide are left out.
+    """
+    if recording.contact is None:
+        raise ValueError(
+            f"{recording.path}: sliding needs the contact point of the pushing force "
+            "(a PointStamped or pose topic; name it with --topic contact=/name)"
+        )
+    bias = np.zeros(3) if bias is None else np.asarray(bias, dtype=float)
+    grid, xy, yaw = _planar_grid(recording, config, smooth=False)  # smoothing would blunt stops
+    period = grid[1] - grid[0]
+    substeps = max(1, int(round(period / config.dt_s)))
+    dt = period / substeps
+    samples = max(2, int(round(config.window_s / period)))
+    c = recording.contact
+    contact_grid = np.stack([np.interp(grid, c.t_s, c.position[:, k]) for k in range(2)], axis=1)
+    reach = float(np.hypot(*body.half_extents_m[:2])) + config.contact_margin_m
+    touching = np.linalg.norm(contact_grid - xy, axis=1) < reach
+    speed = np.linalg.norm(np.gradient(xy, grid, axis=0), axis=1)
+    starts = []
+    for s in range(0, len(grid) - samples, samples):
+        span = slice(s, s + samples + 1)
+        if not touching[span].all():
+            continue
+        if moving_only and np.median(speed[span]) < config.moving_speed_m_s:
+            continue
+        starts.append(s)
+    if not starts:
+        raise ValueError(
+            f"{recording.path}: no {config.window_s} s window in which the pusher touches the object"
+            + (" and it slides" if moving_only else "")
+        )
+    starts = np.asarray(starts)
+    w = recording.wrench
+    force = w.force[:, :2] - bias[:2]  # unfiltered: its noise averages out in the integration
+    t_step = grid[starts][None, :] + dt * np.arange(samples * substeps)[:, None]
+    f = np.stack([np.interp(t_step, w.t_s, force[:, k]) for k in range(2)], axis=-1)
+    p = np.stack([np.interp(t_step, c.t_s, c.position[:, k]) for k in range(2)], axis=-1)
+    rot = Rotation.from_rotvec(np.c_[np.zeros((len(yaw), 2)), yaw])
+    pos3 = np.c_[xy, np.zeros(len(grid))]
+    start = []
+    for s in starts:
+        twist = local_twist(grid, pos3, rot, s, config.twist_half_width)
+        start.append([xy[s, 0], xy[s, 1], yaw[s], twist[0], twist[1], twist[5]])
+    idx = starts[None, :] + np.arange(samples + 1)[:, None]
+    measured = np.stack([xy[idx, 0], xy[idx, 1], yaw[idx]], axis=-1)
+    return PushWindows(dt, substeps, grid[starts], np.asarray(start), f, p, measured)
+
+
+def concat_push_windows(parts: list[PushWindows]) -> PushWindows:
+    """Windows of several recordings as one batch (same step, substeps and length)."""
+    first = parts[0]
+    for p in parts[1:]:
+        if (p.substeps, p.step_count) != (first.substeps, first.step_count) or abs(p.dt_s - first.dt_s) > 1e-6:
+            raise ValueError("recordings differ in pose rate; their windows cannot share one batch")
+    return PushWindows(
+        first.dt_s, first.substeps,
+        np.concatenate([p.t_start_s for p in parts]),
+        np.concatenate([p.start for p in parts]),
+        np.concatenate([p.force for p in parts], axis=1),
+        np.concatenate([p.contact for p in parts], axis=1),
+        np.concatenate([p.measured for p in parts], axis=1),
+    )
+
+
+# --------------------------------------------------------------------------
+# kernels, beside their launches in SlidingRollout
+
+
+@wp.kernel
+def assign_sliding_params(
+    theta: wp.array[float],
+    inertia_xy: wp.vec2,
+    shape_body: wp.array[int],
+    body_mass: wp.array[float],
+    body_inv_mass: wp.array[float],
+    body_inertia: wp.array[wp.mat33],
+    body_inv_inertia: wp.array[wp.mat33],
+    shape_material_mu: wp.array[float],
+):
+    """Write mu (every shape, so the pair average is mu), mass [kg] and I_zz [kg m^2] on the tape.
+
+    One thread per shape; the thread of a body's first contact sphere also writes
+    the body. SemiImplicit integrates with the inverses (newton.md trap 1).
+    """
+    s = wp.tid()
+    shape_material_mu[s] = theta[0]
+    b = shape_body[s]
+    if b >= 0 and (s == 0 or shape_body[s - 1] != b):
+        m = theta[1]
+        inertia = wp.mat33(inertia_xy[0], 0.0, 0.0, 0.0, inertia_xy[1], 0.0, 0.0, 0.0, theta[2])
+        body_mass[b] = m
+        body_inv_mass[b] = 1.0 / m
+        body_inertia[b] = inertia
+        body_inv_inertia[b] = wp.inverse(inertia)
+
+
+@wp.kernel
+def set_planar_start_state(
+    start: wp.array[wp.spatial_vector],
+    velocity_correction: wp.array[wp.vec3],
+    rest_height_m: float,
+    body_q: wp.array[wp.transform],
+    body_qd: wp.array[wp.spatial_vector],
+):
+    """Body w at (x, y, rest height), heading yaw, velocity (vx, vy, 0) [m/s] and yaw rate [rad/s],
+    each rate plus the window's correction (vx, vy, yaw rate)."""
+    w = wp.tid()
+    s = start[w]
+    c = velocity_correction[w]
+    body_q[w] = wp.transform(wp.vec3(s[0], s[1], rest_height_m), wp.quat_from_axis_angle(wp.vec3(0.0, 0.0, 1.0), s[2]))
+    body_qd[w] = wp.spatial_vector(wp.vec3(s[3] + c[0], s[4] + c[1], 0.0), wp.vec3(0.0, 0.0, s[5] + c[2]))
+
+
+@wp.kernel
+def apply_pusher_force(
+    body_q: wp.array[wp.transform],
+    body_com: wp.array[wp.vec3],
+    force: wp.array2d[wp.vec2],
+    contact: wp.array2d[wp.vec2],
+    step: int,
+    body_f: wp.array[wp.spatial_vector],
+):
+    """Horizontal pusher force [N] at the contact point (x, y) [m], taken at the COM's height.
+
+    The height at which a pusher meets the object only tilts it (SemiImplicit
+    would rock the box on its contacts); the planar motion needs the in-plane moment.
+    """
+    w = wp.tid()
+    X = body_q[w]
+    c = wp.transform_point(X, body_com[w])
+    f2 = force[step, w]
+    p2 = contact[step, w]
+    f = wp.vec3(f2[0], f2[1], 0.0)
+    arm = wp.vec3(p2[0] - c[0], p2[1] - c[1], 0.0)
+    body_f[w] = wp.spatial_vector(f, wp.cross(arm, f))
+
+
+@wp.kernel
+def eval_planar_error(
+    body_q: wp.array[wp.transform],
+    measured: wp.array2d[wp.vec3],
+    sample: int,
+    yaw_length_m: float,
+    residual: wp.array3d[float],
+):
+    """Per window: x, y error [m] and heading error [rad] times yaw_length_m [m]."""
+    w = wp.tid()
+    X = body_q[w]
+    p = wp.transform_get_translation(X)
+    ax = wp.quat_rotate(wp.transform_get_rotation(X), wp.vec3(1.0, 0.0, 0.0))
+    m = measured[sample, w]
+    dyaw = wp.atan2(ax[1], ax[0]) - m[2]
+    dyaw = dyaw - 2.0 * wp.pi * wp.round(dyaw / (2.0 * wp.pi))  # the short way round
+    residual[sample, w, 0] = p[0] - m[0]
+    residual[sample, w, 1] = p[1] - m[1]
+    residual[sample, w, 2] = dyaw * yaw_length_m
+
+
+@wp.kernel
+def eval_sum_squares(residual: wp.array3d[float], loss: wp.array[float]):
+    """loss += sum of squared residuals [m^2]."""
+    j, w, k = wp.tid()
+    r = residual[j, w, k]
+    wp.atomic_add(loss, 0, r * r)
+
+
+class SlidingRollout:
+    """One pushed body on a shared ground plane per window; SemiImplicit, no damping."""
+
+    def __init__(self, windows: PushWindows, body: PlanarBody, config: SlidingConfig, device: str = "cpu"):
+        import newton
+
+        self.windows, self.body, self.config, self.device = windows, body, config, device
+        hx, hy, hz = body.half_extents_m
+        W = windows.window_count
+        radius = 1e-3
+        cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0  # cell centres on [-1, 1]
+        n_contacts = _GRID * _GRID
+        ke = body.mass_kg * GRAVITY_M_S2 / config.contact_sink_m
+        kd = 2.0 * config.contact_damping_ratio * np.sqrt(ke * body.mass_kg)
+        cfg = newton.ModelBuilder.ShapeConfig(
+            ke=ke / n_contacts, kd=kd / n_contacts,
+            # slip speed mu g dt: Coulomb (mu-sensitive) at the speeds a push is fitted at,
+            # while kf dt / (m / n) = 1 keeps the explicit viscous branch stable (deadbeat)
+            kf=body.mass_kg / n_contacts / windows.dt_s, mu=0.5, density=0.0,
+        )
+        sub = newton.ModelBuilder(gravity=(0.0, 0.0, -GRAVITY_M_S2), up_axis=newton.Axis.Z)
+        b = sub.add_body(mass=body.mass_kg, inertia=wp.mat33(np.eye(3) * body.izz_kgm2), lock_inertia=True)
+        for gx in cells:
+            for gy in cells:
+                sub.add_shape_sphere(b, xform=wp.transform(wp.vec3(gx * hx, gy * hy, -hz + radius), wp.quat_identity()),
+                                     radius=radius, cfg=cfg)
+        builder = newton.ModelBuilder(gravity=(0.0, 0.0, -GRAVITY_M_S2), up_axis=newton.Axis.Z)
+        builder.replicate(sub, W)
+        builder.add_ground_plane(cfg=cfg)
+        self.model = builder.finalize(device=device, requires_grad=True)
+        self.solver = newton.solvers.SolverSemiImplicit(self.model, angular_damping=0.0)
+        self.control = self.model.control()
+        self.states = [self.model.state(requires_grad=True) for _ in range(windows.step_count + 1)]
+        self.rest_height_m = hz - config.contact_sink_m
+        m_box = body.mass_kg
+        self.inertia_xy = wp.vec2(m_box * (hy * hy + hz * hz) / 3.0, m_box * (hx * hx + hz * hz) / 3.0)
+        self.yaw_length_m = config.yaw_length_m or float(np.hypot(hx, hy))
+
+        self.start = wp.array(windows.start.astype(np.float32), dtype=wp.spatial_vector, device=device)
+        self.force = wp.array(windows.force.astype(np.float32), dtype=wp.vec2, device=device)
+        self.contact = wp.array(windows.contact.astype(np.float32), dtype=wp.vec2, device=device)
+        self.measured = wp.array(windows.measured.astype(np.float32), dtype=wp.vec3, device=device)
+        self.theta = wp.zeros(3, dtype=float, device=device, requires_grad=True)
+        self.correction = wp.zeros(W, dtype=wp.vec3, device=device, requires_grad=True)
+        self.residual = wp.zeros((windows.sample_count + 1, W, 3), dtype=float, device=device, requires_grad=True)
+        self.loss = wp.zeros(1, dtype=float, device=device, requires_grad=True)
+
+        # Contacts against a plane depend only on the body-local sphere centres: found once.
+        self.pipeline = newton.CollisionPipeline(self.model, broad_phase="explicit", requires_grad=True)
+        self.contacts = self.pipeline.contacts()
+        wp.launch(set_planar_start_state, dim=W, inputs=[self.start, self.correction, self.rest_height_m],
+                  outputs=[self.states[0].body_q, self.states[0].body_qd], device=device)
+        self.pipeline.collide(self.states[0], self.contacts)
+        found = int(self.contacts.rigid_contact_count.numpy()[0])
+        if found != W * n_contacts:
+            raise RuntimeError(f"sliding model: expected {W * n_contacts} support contacts, the pipeline found {found}")
+
+    def _forward(self) -> None:
+        w, model = self.windows, self.model
+        wp.launch(assign_sliding_params, dim=model.shape_count, inputs=[self.theta, self.inertia_xy, model.shape_body],
+                  outputs=[model.body_mass, model.body_inv_mass, model.body_inertia, model.body_inv_inertia,
+                           model.shape_material_mu], device=self.device)
+        s0 = self.states[0]
+        wp.launch(set_planar_start_state, dim=w.window_count, inputs=[self.start, self.correction, self.rest_height_m],
+                  outputs=[s0.body_q, s0.body_qd], device=self.device)
+        self.residual.zero_()
+        for step in range(w.step_count):
+            s, s_next = self.states[step], self.states[step + 1]
+            wp.launch(apply_pusher_force, dim=w.window_count,
+                      inputs=[s.body_q, model.body_com, self.force, self.contact, step],
+                      outputs=[s.body_f], device=self.device)
+            self.solver.step(s, s_next, self.control, self.contacts, w.dt_s)
+            if (step + 1) % w.substeps == 0:
+                wp.launch(eval_planar_error, dim=w.window_count,
+                          inputs=[s_next.body_q, self.measured, (step + 1) // w.substeps, self.yaw_length_m],
+                          outputs=[self.residual], device=self.device)
+
+    def _load(self, theta, correction) -> None:
+        self.theta.assign(np.asarray(theta, dtype=np.float32))
+        W = self.windows.window_count
+        c = np.zeros((W, 3)) if correction is None else np.asarray(correction).reshape(W, 3)
+        self.correction.assign(c.astype(np.float32))
+
+    def residuals(self, theta, correction=None) -> np.ndarray:
+        """Errors [S, W, 3] at samples 1..S: x, y [m], heading x yaw_length_m [m].
+
+        correction [W, 3]: start-velocity corrections (vx, vy [m/s], yaw rate [rad/s]).
+        """
+        self._load(theta, correction)
+        self._forward()
+        return self.residual.numpy()[1:].astype(float)
+
+    def trajectories(self, theta, correction=None) -> np.ndarray:
+        """Simulated x, y [m] and yaw [rad] at samples 0..S, shape [S+1, W, 3]."""
+        r = self.residuals(theta, correction)
+        pred = self.windows.measured.copy()
+        pred[1:, :, :2] += r[:, :, :2]
+        pred[1:, :, 2] += r[:, :, 2] / self.yaw_length_m
+        return pred
+
+    def loss_and_grad(self, theta, correction=None) -> tuple[float, np.ndarray, np.ndarray]:
+        """Sum of squared residuals [m^2] and its gradients w.r.t. theta and the corrections [W, 3]."""
+        self._load(theta, correction)
+        tape = wp.Tape()
+        with tape:
+            self._forward()
+            self.loss.zero_()
+            wp.launch(eval_sum_squares, dim=self.residual.shape, inputs=[self.residual], outputs=[self.loss],
+                      device=self.device)
+        tape.backward(self.loss)
+        out = (float(self.loss.numpy()[0]), self.theta.grad.numpy().astype(float).copy(),
+               self.correction.grad.numpy().astype(float).copy())
+        tape.zero()
+        return out
+
+
+# --------------------------------------------------------------------------
+# the fit
+
+
+@dataclass(frozen=True)
+class SlidingFit:
+    """Result of `identify_sliding`.
+
+    theta: (mu, mass [kg], I_zz [kg m^2]); std: their standard deviations from the
+    curvature at the optimum, start velocities profiled out (residuals treated as
+    independent, so optimistic); determined: per parameter, whether the data at
+    least halve the prior's variance (else the value is essentially the prior's
+    and is marked "prior").
+    rmse_position_m, rmse_heading_rad: windowed replay at theta over the fitted
+    windows, each started at its fitted velocity.
+    loss_history: objective per evaluation.
+    """
+
+    theta: np.ndarray
+    std: np.ndarray
+    determined: tuple[bool, bool, bool]
+    rmse_position_m: float
+    rmse_heading_rad: float
+    window_count: int
+    evaluations: int
+    loss_history: list = field(default_factory=list)
+    correction: np.ndarray | None = None
+    """Fitted start-velocity corrections per window [W, 3]: vx, vy [m/s], yaw rate [rad/s]."""
+
+    def provenance(self) -> dict:
+        names = ("friction", "mass", "izz")
+        return {
+            "theta": dict(zip(names, map(float, self.theta))),
+            "std": dict(zip(names, map(float, self.std))),
+            "determined_by_data": dict(zip(names, self.determined)),
+            "windows": self.window_count,
+            "evaluations": self.evaluations,
+            "rmse_position_m": self.rmse_position_m,
+            "rmse_heading_rad": self.rmse_heading_rad,
+        }
+
+
+def replay_errors(rollout: SlidingRollout, theta, correction=None) -> tuple[float, float]:
+    """Position RMSE [m] and heading RMSE [rad] of the windowed replay at theta."""
+    r = rollout.residuals(theta, correction)
+    return float(np.sqrt(np.mean(np.sum(r[..., :2] ** 2, axis=-1)))), float(
+        np.sqrt(np.mean(r[..., 2] ** 2)) / rollout.yaw_length_m
+    )
+
+
+def identify_sliding(
+    windows: PushWindows,
+    body: PlanarBody,
+    config: SlidingConfig,
+    mu_prior: float = 0.3,
+    free: tuple[bool, bool, bool] = (True, True, True),
+    device: str = "cpu",
+) -> SlidingFit:
+    """Fit theta = (mu, m, I_zz) to the windows by L-BFGS-B on the tape's gradient.
+
+    The objective is the pose loss over sigma^2 (sigma: the fit's own residual
+    RMS, refitted once) plus the log-normal prior of m and I_zz; mu has only its
+    bounds. `free` freezes parameters at their prior (e.g. free=(True, False, False)).
+    """
+    from scipy.optimize import minimize
+
+    rollout = SlidingRollout(windows, body, config, device)
+    W = windows.window_count
+    prior = np.log([mu_prior, body.mass_kg, body.izz_kgm2])
+    prior_std = np.array([np.inf, body.mass_rel_std, body.izz_rel_std])
+    prior_curv = np.where(np.isfinite(prior_std), 1.0 / prior_std**2, 0.0)
+    lo = np.log([config.mu_bounds[0], body.mass_kg / 4, body.izz_kgm2 / 4])
+    hi = np.log([config.mu_bounds[1], body.mass_kg * 4, body.izz_kgm2 * 4])
+    free_idx = np.flatnonzero(free)
+    k = len(free_idx)
+    # corrections are optimised in units of a typical start-rate error: 1 cm/s and 0.1 rad/s
+    c_scale = np.tile([0.01, 0.01, 0.1], W)
+    history: list[float] = []
+    n_res = windows.sample_count * W * 3
+
+    def split(x):
+        u = prior.copy()
+        u[free_idx] = x[:k]
+        return u, (x[k:] * c_scale).reshape(W, 3)
+
+    def data_gradient(x, sigma2):
+        u, c = split(x)
+        theta = np.exp(u)
+        loss, g, gc = rollout.loss_and_grad(theta, c)
+        return 0.5 * loss / sigma2, np.concatenate([(0.5 * g * theta / sigma2)[free_idx],
+                                                    0.5 * gc.ravel() * c_scale / sigma2])
+
+    def objective(x, sigma2):
+        value, grad = data_gradient(x, sigma2)
+        u, _ = split(x)
+        value += 0.5 * np.sum(prior_curv * (u - prior) ** 2)
+        grad[:k] += (prior_curv * (u - prior))[free_idx]
+        history.append(float(value))
+        return value, grad
+
+    # the data's weight against the prior is 1 / sigma^2: fitted at a typical tracker error first,
+    # then again at the residual level that fit leaves
+    x = np.concatenate([prior[free_idx], np.zeros(3 * W)])
+    bounds = list(zip(lo[free_idx], hi[free_idx])) + [(-20.0, 20.0)] * (3 * W)
+    sigma2 = (1e-3) ** 2
+    for _ in range(2):
+        x = minimize(objective, x, args=(sigma2,), jac=True, method="L-BFGS-B", bounds=bounds,
+                     options={"maxiter": config.max_iterations, "ftol": 1e-10, "gtol": 1e-8}).x
+        u, c = split(x)
+        sigma2 = max(float(np.sum(rollout.residuals(np.exp(u), c) ** 2)) / n_res, 1e-12)
+    u, correction = split(x)
+    theta = np.exp(u)
+
+    # curvature of the data term by central differences of the tape gradient. Each window's
+    # corrections touch only its own residuals, so their block is diagonal per window and three
+    # perturbations (one per component, all windows at once) give it; theta's columns take one each.
+    h = 1e-2
+    n = k + 3 * W
+    cols = {}
+    for j in range(k):
+        e = np.zeros(n)
+        e[j] = h
+        cols[j] = (data_gradient(x + e, sigma2)[1] - data_gradient(x - e, sigma2)[1]) / (2 * h)
+    H_tt = np.array([cols[j][:k] for j in range(k)])
+    H_ct = np.array([cols[j][k:] for j in range(k)]).T.reshape(W, 3, k)
+    H_cc = np.zeros((W, 3, 3))
+    for comp in range(3):
+        e = np.zeros(n)
+        e[k + comp::3] = h
+        d = ((data_gradient(x + e, sigma2)[1] - data_gradient(x - e, sigma2)[1]) / (2 * h))[k:].reshape(W, 3)
+        H_cc[:, :, comp] = d
+    H_cc = 0.5 * (H_cc + np.transpose(H_cc, (0, 2, 1)))
+    # theta's information with every window's start velocity profiled out (Schur complement)
+    H = 0.5 * (H_tt + H_tt.T) - sum(H_ct[w].T @ np.linalg.pinv(H_cc[w]) @ H_ct[w] for w in range(W))
+    H_post = H + np.diag(prior_curv[free_idx])
+    cov = np.linalg.pinv(H_post)
+    std_log = np.array(prior_std, dtype=float)
+    std_log[free_idx] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    # determined: the data at least halve the prior's variance (mu has no prior: determined when free)
+    determined = tuple(bool(free[i] and (not np.isfinite(prior_std[i]) or std_log[i] ** 2 < 0.5 * prior_std[i] ** 2))
+                       for i in range(3))
+    std = theta * np.where(np.isfinite(std_log), std_log, 0.0)
+    rmse_p, rmse_h = replay_errors(rollout, theta, correction)
+    return SlidingFit(theta, std, determined, rmse_p, rmse_h, W, len(history), history, correction=correction)
+
+
+def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bias: np.ndarray,
+                          mass_kg: float) -> float:
+    """The lab's estimate, mu = steady pushing force / (m g).
+
+    "Steady pushing": the object slides and the pusher presses (force above a
+    quarter of its 90th percentile); the median horizontal force over those
+    samples. It ignores inertia and the force that turns the object, so it
+    reads high while the object accelerates and low while it turns.
+    """
+    windows = push_windows(recording, body, config, bias)
+    f = np.linalg.norm(windows.force, axis=-1).ravel()
+    pressing = f > 0.25 * np.percentile(f, 90)
+    return float(np.median(f[pressing]) / (mass_kg * GRAVITY_M_S2))
+
+
+@dataclass(frozen=True)
+class PushedIdentification:
+    """What `identify_pushed` gives the build.
+
+    fit: the sliding fit on the trials; bias_force_n: per trial [N, world];
+    baseline and final: (position RMSE [m], heading RMSE [rad], loss [m^2]) of the
+    windowed replay at the prior's and the fitted theta, on the held-out recording
+    when there is one, else on the trials; traces: the replay for the report.
+    """
+
+    fit: SlidingFit
+    prior_theta: np.ndarray
+    bias_force_n: list
+    baseline: tuple[float, float, float]
+    final: tuple[float, float, float]
+    traces: dict
+    config: SlidingConfig
+
+    def provenance(self) -> dict:
+        from dataclasses import asdict
+
+        return {"kind": "sliding", **self.fit.provenance(), "prior_theta": list(map(float, self.prior_theta)),
+                "force_bias_world_n": [list(map(float, b)) for b in self.bias_force_n],
+                "config": asdict(self.config)}
+
+
+def identify_pushed(trials, holdout, body: PlanarBody, mu_prior: float, config: SlidingConfig,
+                    device: str = "cpu") -> PushedIdentification:
+    """Fit mu (with m and I_zz where the pushes determine them) on all trials; replay the holdout."""
+    biases = [estimate_force_bias(r, config) for r in trials]
+    windows = concat_push_windows([push_windows(r, body, config, b) for r, b in zip(trials, biases)])
+    fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=(True, config.fit_mass, True), device=device)
+    prior_theta = np.array([mu_prior, body.mass_kg, body.izz_kgm2])
+    check = windows
+    if holdout is not None:
+        check = push_windows(holdout, body, config, estimate_force_bias(holdout, config))
+    rollout = SlidingRollout(check, body, config, device)
+    metrics, paths = {}, {}
+    for name, theta in (("baseline", prior_theta), ("final", fit.theta)):
+        r = rollout.residuals(theta)
+        p, h = replay_errors(rollout, theta)
+        metrics[name] = (p, h, float(np.sum(r**2)))
+        paths[name] = rollout.trajectories(theta)
+    S = check.sample_count
+    t = (check.t_start_s[None, :] + config.sample_period_s * np.arange(S + 1)[:, None]).ravel()
+
+    def xyz(a):
+        return np.c_[a[..., :2].reshape(-1, 2), np.zeros(len(t))]
+
+    traces = {"t_s": t, "measured_position": xyz(check.measured), "baseline_position": xyz(paths["baseline"]),
+              "final_position": xyz(paths["final"]), "window_s": S * config.sample_period_s}
+    return PushedIdentification(fit, prior_theta, biases, metrics["baseline"], metrics["final"], traces, config)

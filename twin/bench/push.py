@@ -1,0 +1,345 @@
+"""`twin bench push` and `twin bench push-real`: surface friction of pushed objects.
+
+push: synthetic pushes with known friction (pipelines/synth/push.py), one per
+seed, each with its own mu, mass, push offset (so the block turns) and a sensor
+bias; the prior's mass is 20 % off the truth, as a material-library density can be.
+
+push-real: the 2015 MIT block bags (../shared/data/mit-push/ros2_mcap), read as
+they were recorded: Vicon pose, un-zeroed ATI wrench in link_ft resolved
+through the bag's /tf, and /tip_pose (a PoseStamped of link_ft in base_link,
+header frame empty) as the contact point. Per trial: mu, and the quasi-static
+estimate beside it; per block: the spread across trials. Then predictive
+validity: identified on half of a block's trials, the other half's motion
+predicted from its measured force and contact point, in windows started from
+measured states, against the prior's friction.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+DATA = (Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "mit-push").resolve()
+
+
+def _box_izz(mass_kg: float, half_extents_m) -> float:
+    hx, hy, _ = half_extents_m
+    return mass_kg * ((2 * hx) ** 2 + (2 * hy) ** 2) / 12.0
+
+
+def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float = 0.5) -> list[dict]:
+    """Print and return one row per seed and mode: truth, estimate and errors.
+
+    Modes: "m known" fits mu and I_zz with the true mass (objects of known mass, as
+    in the MIT dataset); "m free" fits mu, m and I_zz from a mass prior
+    `prior_mass_factor` x the truth (what pushes alone can tell).
+    """
+    from pipelines.identify.sliding import (
+        PlanarBody, SlidingConfig, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
+    )
+    from pipelines.logs import read_recording
+    from pipelines.synth.push import PushConfig, write_push
+
+    config = SlidingConfig()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(seeds):
+            rng = np.random.default_rng(seed)
+            push = PushConfig(
+                mu=float(rng.uniform(0.2, 0.6)), mass_kg=float(rng.uniform(0.4, 1.2)),
+                offset_m=float(rng.uniform(-0.025, 0.025)), yaw0_rad=float(rng.uniform(-0.3, 0.3)),
+                force_bias_n=tuple(rng.uniform(-0.5, 0.5, 3)), seed=seed,
+            )
+            path = Path(tmp) / f"push_{seed}.mcap"
+            truth = write_push(path, push)
+            rec = read_recording(path)
+            bias = estimate_force_bias(rec, config)
+            for mode, mass, free in (("m known", truth.mass_kg, (True, False, True)),
+                                     ("m free", truth.mass_kg * prior_mass_factor, (True, True, True))):
+                t0 = time.perf_counter()
+                body = PlanarBody(push.half_extents_m, mass, _box_izz(mass, push.half_extents_m))
+                windows = push_windows(rec, body, config, bias)
+                fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=free)
+                rows.append({
+                    "seed": seed, "mode": mode, "mu_true": truth.mu, "mu": float(fit.theta[0]),
+                    "mu_err_pct": 100 * (fit.theta[0] / truth.mu - 1),
+                    "mu_m_err_pct": 100 * (fit.theta[0] * fit.theta[1] / (truth.mu * truth.mass_kg) - 1),
+                    "mass_err_pct": 100 * (fit.theta[1] / truth.mass_kg - 1),
+                    "izz_err_pct": 100 * (fit.theta[2] / truth.izz_kgm2 - 1),
+                    "determined": fit.determined, "turn_deg": _net_yaw_deg(rec), "windows": fit.window_count,
+                    "mu_qs_true_mass": quasi_static_friction(rec, body, config, bias, truth.mass_kg),
+                    "bias_err_n": float(np.linalg.norm(bias - np.asarray(push.force_bias_n))),
+                    "rmse_mm": 1e3 * fit.rmse_position_m, "seconds": time.perf_counter() - t0,
+                })
+    print(f"prior mu = {mu_prior}; 'm free' starts from a mass prior = truth x {prior_mass_factor}; "
+          f"'data' marks the parameters (mu, m, Izz) the pushes determined")
+    print(f"{'seed':>4} {'mode':7} {'mu true':>7} {'mu':>6} {'mu err %':>8} {'mu*m err %':>10} {'m err %':>7} "
+          f"{'Izz err %':>9} {'data':>4} {'turn deg':>8} {'win':>3} {'mu qs':>6} {'bias err N':>10} "
+          f"{'rmse mm':>7} {'s':>5}")
+    for r in rows:
+        flags = "".join("y" if d else "n" for d in r["determined"])
+        print(f"{r['seed']:4d} {r['mode']:7} {r['mu_true']:7.3f} {r['mu']:6.3f} {r['mu_err_pct']:+8.2f} "
+              f"{r['mu_m_err_pct']:+10.2f} {r['mass_err_pct']:+7.2f} {r['izz_err_pct']:+9.2f} {flags:>4} "
+              f"{r['turn_deg']:8.1f} {r['windows']:3d} {r['mu_qs_true_mass']:6.3f} {r['bias_err_n']:10.3f} "
+              f"{r['rmse_mm']:7.3f} {r['seconds']:5.1f}")
+    for mode in ("m known", "m free"):
+        worst = max(abs(r["mu_err_pct"]) for r in rows if r["mode"] == mode)
+        worst_mm = max(abs(r["mu_m_err_pct"]) for r in rows if r["mode"] == mode)
+        print(f"{mode}: worst |mu error| {worst:.2f} %, worst |mu*m error| {worst_mm:.2f} % over {seeds} seeds "
+              "(target: mu within 5 %)")
+    return rows
+
+
+def _net_yaw_deg(rec) -> float:
+    from scipy.spatial.transform import Rotation
+
+    x = Rotation.from_quat(rec.pose.quat_xyzw).apply([1.0, 0.0, 0.0])
+    yaw = np.unwrap(np.arctan2(x[:, 1], x[:, 0]))
+    return float(np.degrees(yaw[-1] - yaw[0]))
+
+
+@dataclass(frozen=True)
+class Block:
+    """A 2015 block set: its folder, Vicon topic, what is assumed of its size and material.
+
+    None of the blocks' masses is known (mit-push README); sizes other than the
+    steel block's mesh are inferred from marker positions.
+    """
+
+    folder: str
+    vicon_topic: str
+    half_extents_m: tuple[float, float, float]
+    material: str
+    size_source: str
+
+
+BLOCKS = (
+    Block("St_block", "/vicon/SteelBlock/SteelBlock", (0.049475, 0.049475, 0.004735), "steel",
+          "meshes/pnpush_blocks/SteelBlock.stl"),
+    Block("Al_block", "/vicon/MetalSquare/MetalSquare", (0.049475, 0.049475, 0.004735), "aluminium",
+          "inferred: a plate like the steel one (markers at +-35 mm)"),
+    Block("Plastic_block", "/vicon/SquareBlock/SquareBlock", (0.0375, 0.0375, 0.025), "abs",
+          "inferred: markers span 72 x 74 mm, 61 mm high"),
+)
+
+
+def read_block_trial(path: Path, block: Block):
+    """One bag as recorded: pose from Vicon, raw /netft_data through /tf (a reaction), /tip_pose as the contact."""
+    from pipelines.logs import read_recording
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # per-bag notes (dropouts, held transforms) are not the point here
+        return read_recording(
+            path, {"pose": block.vicon_topic, "wrench": "/netft_data", "contact": "/tip_pose"},
+            {"contact": "base_link"},
+            wrench_reaction=True,  # the ATI sensor reads the block's push back on the probe
+        )
+
+
+def block_prior(block: Block):
+    from assets.materials import material_range
+    from pipelines.identify.sliding import PlanarBody
+
+    material = material_range(block.material)
+    hx, hy, hz = block.half_extents_m
+    mass = material.density * 8 * hx * hy * hz
+    return PlanarBody(block.half_extents_m, mass, _box_izz(mass, block.half_extents_m)), material.kinetic()[0]
+
+
+FREE = (True, False, True)
+"""Real blocks: mu and I_zz fitted, the mass from the prior (unknown for every block; see bench push)."""
+
+
+def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction.png")) -> dict:
+    """Print per-trial friction, per-block spread, and predictive validity; save the figure."""
+    from pipelines.identify.sliding import (
+        SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
+        replay_errors,
+    )
+
+    bags = root / "ros2_mcap"
+    if not bags.exists():
+        raise RuntimeError(f"{bags}: the MIT pushing bags are not there")
+    config = SlidingConfig()
+    trials, summary, prediction = [], [], []
+    for block in BLOCKS:
+        body, mu_prior = block_prior(block)
+        per_block = []
+        for trial_dir in sorted((bags / block.folder).iterdir(), key=lambda p: int(p.name.rsplit("_", 1)[1])):
+            t0 = time.perf_counter()
+            rec = read_block_trial(trial_dir, block)
+            bias = estimate_force_bias(rec, config)
+            try:
+                windows = push_windows(rec, body, config, bias)
+            except ValueError as exc:
+                trials.append({"block": block.folder, "trial": trial_dir.name, "skipped": str(exc)})
+                continue
+            fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=FREE)
+            row = {
+                "block": block.folder, "trial": trial_dir.name, "mu": float(fit.theta[0]),
+                "mass": float(fit.theta[1]), "mu_m": float(fit.theta[0] * fit.theta[1]),
+                "determined": fit.determined, "windows": fit.window_count,
+                "mu_qs_prior_mass": quasi_static_friction(rec, body, config, bias, body.mass_kg),
+                "bias_n": bias, "rmse_mm": 1e3 * fit.rmse_position_m,
+                "rmse_heading_deg": float(np.degrees(fit.rmse_heading_rad)), "turn_deg": _net_yaw_deg(rec),
+                "seconds": time.perf_counter() - t0, "windows_data": windows, "theta": fit.theta,
+            }
+            trials.append(row)
+            per_block.append(row)
+        mus = np.array([r["mu"] for r in per_block])
+        mums = np.array([r["mu_m"] for r in per_block])
+        qs = np.array([r["mu_qs_prior_mass"] for r in per_block])
+        summary.append({
+            "block": block.folder, "trials": len(per_block), "mu_mean": mus.mean(),
+            "mu_cv_pct": 100 * mus.std(ddof=1) / mus.mean(),
+            "mu_m_cv_pct": 100 * mums.std(ddof=1) / mums.mean(), "qs_mean": qs.mean(),
+            "qs_cv_pct": 100 * qs.std(ddof=1) / qs.mean(), "prior_mass": body.mass_kg, "mu_prior": mu_prior,
+        })
+
+        # predictive validity: identified on the odd-numbered trials (the median of their estimates),
+        # the even-numbered ones predicted
+        fit_rows, test_rows = per_block[0::2], per_block[1::2]
+        identified = np.median([r["theta"] for r in fit_rows], axis=0)
+        prior_theta = np.array([mu_prior, body.mass_kg, body.izz_kgm2])
+        for r in test_rows:
+            rollout = SlidingRollout(r["windows_data"], body, config)
+            p_fit, h_fit = replay_errors(rollout, identified)
+            p_prior, h_prior = replay_errors(rollout, prior_theta)
+            prediction.append({
+                "block": block.folder, "trial": r["trial"], "mu_fit": float(identified[0]),
+                "izz_fit": float(identified[2]), "mu_prior": mu_prior,
+                "pos_mm": 1e3 * p_fit, "pos_prior_mm": 1e3 * p_prior,
+                "heading_deg": float(np.degrees(h_fit)), "heading_prior_deg": float(np.degrees(h_prior)),
+                "traj_fit": rollout.trajectories(identified), "traj_prior": rollout.trajectories(prior_theta),
+                "measured": r["windows_data"].measured,
+            })
+
+    print("per trial (mass from the prior's material density unless 'data' says the pushes determined it):")
+    print(f"{'block':14} {'trial':20} {'mu':>6} {'m kg':>6} {'mu*m':>6} {'data':>4} {'win':>3} {'mu qs':>6} "
+          f"{'turn deg':>8} {'rmse mm':>7} {'rmse deg':>8} {'s':>5}")
+    for r in trials:
+        if "skipped" in r:
+            print(f"{r['block']:14} {r['trial']:20} skipped: {r['skipped']}")
+            continue
+        flags = "".join("y" if d else "n" for d in r["determined"])
+        print(f"{r['block']:14} {r['trial']:20} {r['mu']:6.3f} {r['mass']:6.3f} {r['mu_m']:6.3f} {flags:>4} "
+              f"{r['windows']:3d} {r['mu_qs_prior_mass']:6.3f} {r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} "
+              f"{r['rmse_heading_deg']:8.2f} {r['seconds']:5.1f}")
+    print("\nper block:")
+    print(f"{'block':14} {'trials':>6} {'prior m kg':>10} {'mu prior':>8} {'mu mean':>7} {'mu CV %':>7} "
+          f"{'mu*m CV %':>9} "
+          f"{'qs mean':>7} {'qs CV %':>7}")
+    for s in summary:
+        print(f"{s['block']:14} {s['trials']:6d} {s['prior_mass']:10.3f} {s['mu_prior']:8.3f} {s['mu_mean']:7.3f} "
+              f"{s['mu_cv_pct']:7.2f} {s['mu_m_cv_pct']:9.2f} {s['qs_mean']:7.3f} {s['qs_cv_pct']:7.2f}")
+    print("\npredictive validity: fitted on odd-numbered trials, predicting the others "
+          f"({config.window_s} s windows from measured states, measured force and contact):")
+    print(f"{'block':14} {'trial':20} {'mu fit':>6} {'pos mm':>7} {'prior mm':>8} {'head deg':>8} {'prior deg':>9}")
+    for p in prediction:
+        print(f"{p['block']:14} {p['trial']:20} {p['mu_fit']:6.3f} {p['pos_mm']:7.2f} {p['pos_prior_mm']:8.2f} "
+              f"{p['heading_deg']:8.2f} {p['heading_prior_deg']:9.2f}")
+    _plot_prediction(prediction, figure)
+    print(f"\nfigure: {figure}\n")
+    mit = bench_push_mit(root)
+    return {"trials": trials, "summary": summary, "prediction": prediction, "mit": mit}
+
+
+def _plot_prediction(prediction: list[dict], figure: Path) -> None:
+    """Bars of position and heading RMSE (identified vs prior friction) and one trial's windows overlaid."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure.parent.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    labels = [f"{p['block'].split('_')[0]} {p['trial'].rsplit('_', 1)[1]}" for p in prediction]
+    x = np.arange(len(prediction))
+    for ax, key, unit in ((axes[0], "pos", "mm"), (axes[1], "heading", "deg")):
+        fit = [p[f"{key}_mm" if key == "pos" else "heading_deg"] for p in prediction]
+        prior = [p[f"{key}_prior_mm" if key == "pos" else "heading_prior_deg"] for p in prediction]
+        ax.bar(x - 0.2, prior, 0.4, label="prior friction", color="0.6")
+        ax.bar(x + 0.2, fit, 0.4, label="identified on the other trials", color="tab:blue")
+        ax.set_xticks(x, labels, rotation=60, fontsize=7)
+        ax.set_ylabel(f"{'position' if key == 'pos' else 'heading'} RMSE [{unit}]")
+        ax.legend(fontsize=8)
+    best = max(prediction, key=lambda p: p["measured"].shape[1])
+    ax = axes[2]
+    for w in range(best["measured"].shape[1]):
+        ax.plot(*best["measured"][:, w, :2].T * 1e3, "k-", lw=2, label="measured" if w == 0 else None)
+        ax.plot(*best["traj_prior"][:, w, :2].T * 1e3, "-", color="0.6", label="prior friction" if w == 0 else None)
+        ax.plot(*best["traj_fit"][:, w, :2].T * 1e3, "-", color="tab:blue", label="identified" if w == 0 else None)
+    ax.set_title(f"{best['block']} {best['trial']}: {best['traj_fit'].shape[0] - 1}-sample windows", fontsize=9)
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.axis("equal")
+    ax.legend(fontsize=8)
+    fig.suptitle("Held-out MIT block pushes: object motion predicted from measured pusher force and contact point")
+    fig.tight_layout()
+    fig.savefig(figure, dpi=110)
+    plt.close(fig)
+
+
+def read_mit_json_trial(path: Path, half_height_m: float):
+    """A MIT pushing-dataset JSON trial as a Recording (pose, force and tip in the robot frame).
+
+    Each key holds [t_s, x, y, yaw] (poses) or [t_s, F_x, F_y, tau_z] (the F/T reading
+    in the robot frame, the force ON the probe: negated here). mit-push README, section 2.
+    """
+    import json
+
+    from scipy.spatial.transform import Rotation
+
+    from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack
+
+    d = json.loads(Path(path).read_text())
+    obj, ft, tip = (np.asarray(d[k], dtype=float) for k in ("object_pose", "ft_wrench", "tip_pose"))
+    quat = Rotation.from_euler("z", obj[:, 3:4]).as_quat()
+    pose = PoseTrack(obj[:, 0], np.c_[obj[:, 1:3], np.full(len(obj), half_height_m)], quat, "world", "object",
+                     "object_pose")
+    zeros = np.zeros(len(ft))
+    raw = WrenchTrack(ft[:, 0], np.c_[ft[:, 1:3], zeros], np.c_[zeros, zeros, ft[:, 3]], "ft_wrench", "world")
+    applied = WrenchTrack(ft[:, 0], -raw.force, -raw.torque, "ft_wrench", "world")
+    contact = PointTrack(tip[:, 0], np.c_[tip[:, 1:3], np.full(len(tip), half_height_m)], "world", "tip_pose")
+    t0, t1 = min(obj[0, 0], ft[0, 0]), max(obj[-1, 0], ft[-1, 0])
+    return Recording(Path(path), pose, applied, raw, contact, None, float(t1 - t0))
+
+
+def bench_push_mit(root: Path = DATA) -> list[dict]:
+    """The MIT dataset's JSON trial (hex on plywood, mass known): mu fitted beside the quasi-static estimate."""
+    import json
+
+    from pipelines.identify.sliding import (
+        PlanarBody, SlidingConfig, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
+    )
+
+    objects = json.loads((root / "objects.json").read_text())["objects"]
+    config = SlidingConfig()
+    rows = []
+    for path in sorted((root / "mit_push_dataset" / "json").glob("*.json")):
+        shape = path.name.split("shape=")[1].split("_")[0]
+        spec = objects[shape]
+        r = spec["outline"]["circumradius"]
+        # the hexagon's bounding box as the support face (its grid slightly overstates the turning friction)
+        half = (r, r * np.sqrt(3) / 2, spec["thickness_m_shape_db"] / 2)
+        body = PlanarBody(half, spec["mass_kg"], spec["moment_of_inertia_kgm2"])
+        rec = read_mit_json_trial(path, half[2])
+        bias = estimate_force_bias(rec, config)
+        windows = push_windows(rec, body, config, bias)
+        fit = identify_sliding(windows, body, config, mu_prior=0.35, free=(True, False, False))
+        rows.append({"trial": path.name, "mass": spec["mass_kg"], "mu": float(fit.theta[0]),
+                     "mu_std": float(fit.std[0]),
+                     "mu_qs": quasi_static_friction(rec, body, config, bias, spec["mass_kg"]),
+                     "windows": fit.window_count, "rmse_mm": 1e3 * fit.rmse_position_m,
+                     "rmse_deg": float(np.degrees(fit.rmse_heading_rad)), "turn_deg": _net_yaw_deg(rec)})
+    print("MIT pushing dataset, JSON trial(s), mass and I_zz known (objects.json):")
+    print(f"{'trial':75} {'m kg':>6} {'mu':>6} {'mu qs':>6} {'win':>3} {'turn deg':>8} {'rmse mm':>7} {'rmse deg':>8}")
+    for r in rows:
+        print(f"{r['trial']:75} {r['mass']:6.3f} {r['mu']:6.3f} {r['mu_qs']:6.3f} {r['windows']:3d} "
+              f"{r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} {r['rmse_deg']:8.2f}")
+    return rows
