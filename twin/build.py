@@ -180,7 +180,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             collision.append(rel)
         asset = Asset(
             name=name,
-            kind=config.kind,
+            kind=detection.kind,
             placement=placement,
             theta=theta,
             geometry=Geometry("meshes/visual.obj", tuple(collision)),
@@ -195,6 +195,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             "scan": scan_stats,
             "decompose": parts.stats | {"volume_union_m3": parts.volume_union_m3, "volume_mesh_m3": parts.volume_mesh_m3},
             "prior": prior.provenance(),
+            "kind": detection.to_json(),
             **identify_provenance,
             "validation": validation.to_json(),
             "timings_s": timer.seconds | {"total": time.perf_counter() - t_start},
