@@ -143,7 +143,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             InertialBounds(prior.lower, prior.upper), id_config, config.method, _progress_logger(log),
         )
         if held.selected != config.method and config.method == "newton":
-            log("least squares predicts the held-out recording's impulses better than the Newton fit: keeping it")
+            log("the Newton fit does not predict the held-out recording significantly better: keeping least squares")
         inertial, covariance = held.inertial, held.covariance
         fit_baseline, fit_final = held.fits["baseline"], held.fits[held.selected]
 
