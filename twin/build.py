@@ -11,7 +11,7 @@ import json
 import shutil
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Literal
 
@@ -41,6 +41,7 @@ class BuildConfig:
     cache_dir: Path = Path.home() / ".cache" / "twin"
     vlm: str | None = None
     vlm_model: str | None = None
+    diagnose: bool = True
 
 
 @dataclass
@@ -67,6 +68,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     from assets.materials import material_range
     from exporters import export_all
     from pipelines.decompose import DecomposeConfig, decompose
+    from pipelines.diagnose import DiagnoseConfig, diagnose_held
     from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
     from pipelines.logs import read_recording
     from pipelines.priors import VlmConfig, ask_vlm, describe_object, estimate_prior, scan_image
@@ -116,6 +118,12 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     inertial, covariance = held.inertial, held.covariance
     fit_baseline, fit_final = held.fits["baseline"], held.fits[held.selected]
 
+    diagnosis = None
+    if config.diagnose:
+        diagnosis = timer.run("diagnose", diagnose_held, trials, holdout, X_tracked_body, prior.uniform,
+                              DiagnoseConfig(window_s=config.window_s))
+        _log_diagnosis(diagnosis, log)
+
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])
     ci = lambda v, s: (np.asarray(v) - 1.96 * np.asarray(s), np.asarray(v) + 1.96 * np.asarray(s))  # noqa: E731
@@ -148,6 +156,8 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             geometry=Geometry("meshes/visual.obj", tuple(collision)),
             material=Material(material.name, float(inertial.mass / mesh_object.volume), prior.friction[0]),
             fit=Fit(fit_baseline, fit_final, id_config.window_s),
+            effects=diagnosis.effects if diagnosis else (),
+            unexplained=diagnosis.unexplained if diagnosis else (),
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), "report": "report.html"}
@@ -158,6 +168,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             "decompose": parts.stats | {"volume_union_m3": parts.volume_union_m3, "volume_mesh_m3": parts.volume_mesh_m3},
             "prior": prior.provenance(),
             "identify": {"method": config.method, **held.provenance()},
+            **({"diagnose": diagnosis.provenance()} if diagnosis else {}),
             "tracked_frame_in_object": {"position": list(X_tracked_body.inverse().position),
                                         "quaternion_xyzw": list(X_tracked_body.inverse().quaternion_xyzw)},
             "validation": validation.to_json(),
@@ -167,12 +178,80 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         write_asset(asset, tmp / "asset.json")
         from twin.report import write_report
 
-        write_report(tmp / "report.html", asset_to_json(asset), held.loss_history, held.traces)
+        write_report(tmp / "report.html", asset_to_json(asset), held.loss_history, held.traces,
+                     diagnosis.traces if diagnosis else None)
         _replace_dir(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     log(f"wrote {out}/ in {time.perf_counter() - t_start:.1f} s")
+    return out
+
+
+def _log_diagnosis(diagnosis, log) -> None:
+    for line in diagnosis.findings[:6]:
+        log(f"  residual: {line}")
+    fits = diagnosis.fits
+    for e in diagnosis.effects:
+        log(f"  effect {e.name}: {e.params}")
+    if diagnosis.effects:
+        log(f"  held-out position RMSE {1000 * fits['before'].rmse_position_m:.3f} -> "
+            f"{1000 * fits['after'].rmse_position_m:.3f} mm")
+    else:
+        log("  no effect improves the held-out prediction")
+    for u in diagnosis.unexplained:
+        log(f"  unexplained: {u['summary']}")
+
+
+@dataclass(frozen=True)
+class DiagnoseRunConfig:
+    """`twin diagnose`: the diagnose stage alone on a built OUT and recordings."""
+
+    output: Path
+    logs: tuple[Path, ...]
+    holdout: Path | None = None
+    bootstraps: int = 40
+
+
+def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = print) -> Path:
+    """Diagnose the asset in config.output against recordings; rewrite its asset.json and report.html.
+
+    The identified parameters stay as built; effects, unexplained and provenance.diagnose are replaced.
+    """
+    from assets import Inertial, Pose, asset_to_json, read_asset, write_asset
+    from pipelines.diagnose import DiagnoseConfig, diagnose_held
+    from pipelines.logs import read_recording
+    from twin.report import write_report
+
+    out = Path(config.output)
+    if not (out / "asset.json").is_file():
+        raise BuildError(f"{out}/asset.json: not found; run `twin build` into {out} first")
+    if not config.logs:
+        raise BuildError("no recording given: pass --logs TRIAL.mcap")
+    for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
+        if not Path(path).is_file():
+            raise BuildError(f"{path}: recording not found")
+    asset = read_asset(out / "asset.json")
+    provenance = asset.provenance
+    try:
+        uniform = provenance["prior"]["uniform"]
+        tracked = provenance["tracked_frame_in_object"]
+    except KeyError as exc:
+        raise BuildError(f"{out}/asset.json: provenance lacks {exc}; rebuild it with this version of twin") from exc
+    prior = Inertial(uniform["mass_kg"], tuple(uniform["com_m"]), np.asarray(uniform["inertia_kg_m2"]))
+    X_tracked_body = Pose(tuple(tracked["position"]), tuple(tracked["quaternion_xyzw"])).inverse()
+    trials = [read_recording(p) for p in config.logs]
+    holdout = read_recording(config.holdout) if config.holdout else None
+    diagnosis = diagnose_held(trials, holdout, X_tracked_body, prior,
+                              DiagnoseConfig(bootstraps=config.bootstraps,
+                                             window_s=asset.fit.window_s if asset.fit else 0.1))
+    _log_diagnosis(diagnosis, log)
+    run = {"logs": [str(p) for p in config.logs], "holdout": str(config.holdout) if config.holdout else None}
+    asset = replace(asset, effects=diagnosis.effects, unexplained=diagnosis.unexplained,
+                          provenance={**provenance, "diagnose": diagnosis.provenance() | {"run": run}})
+    write_asset(asset, out / "asset.json")
+    write_report(out / "report.html", asset_to_json(asset), (), None, diagnosis.traces)
+    log(f"updated {out}/asset.json and report.html")
     return out
 
 

@@ -40,6 +40,25 @@ class Build:
     Any failure falls back to the offline prior."""
     vlm_model: str | None = None
     """Model name on the --vlm server (an image-capable one)."""
+    diagnose: bool = True
+    """Run the diagnose stage after identification (--no-diagnose skips it)."""
+
+
+@dataclass(frozen=True)
+class Diagnose:
+    """Find physics the identified model lacks: residual analysis, candidate effects, choice on held-out data.
+
+    Updates OUT/asset.json (effects, unexplained, provenance.diagnose) and OUT/report.html.
+    """
+
+    output: tyro.conf.Positional[Path]
+    """A directory written by `twin build`."""
+    logs: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
+    """MCAP recording of an interaction; repeat for several trials."""
+    holdout: Path | None = None
+    """MCAP recording kept out of the fit; chooses among candidates (else time-blocked cross-validation)."""
+    bootstraps: int = 40
+    """Block-bootstrap resamples of the screening."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +73,11 @@ class Synth:
     mass_kg: float = 0.02
     material: str = "pla_printed"
     seed: int = 0
+    effect: Literal["none", "sensor_bias", "time_delay", "viscous_damping", "quadratic_drag",
+                    "nonuniform_density"] = "none"
+    """Physics to conceal in both recordings (the model twin starts from lacks it)."""
+    effect_magnitude: float = 2.0
+    """Size of the concealed effect as a multiple of the sensor's noise (see twin/bench/diagnose.py)."""
 
 
 @dataclass(frozen=True)
@@ -67,9 +91,11 @@ class Bench:
     crlb: spread of the estimates over --draws noise draws against the Cramer-Rao bound.
     mujoco: paper's recordings identified by mujoco.sysid (pseudo-inertia) and by ours, side by side.
     reconstruct: scans of real meshes and primitives (3-30 cm, two noise levels) against their truth; real Kinect frames.
+    diagnose: --concealed recordings with a hidden effect of random size and --clean ones, shuffled: effect found?
     """
 
-    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct"]]
+    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct",
+                                       "diagnose"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -87,6 +113,12 @@ class Bench:
     """Objects batched per run (throughput)."""
     quick: bool = False
     """A subset that runs in about a minute (reconstruct)."""
+    concealed: int = 40
+    """Recordings with a concealed effect (diagnose)."""
+    clean: int = 10
+    """Recordings without one (diagnose)."""
+    duration_s: float = 3.0
+    """Length of each recording [s] (diagnose)."""
 
 
 def _log(message: str) -> None:
@@ -101,7 +133,7 @@ def _run_build(args: Build) -> None:
             source=args.source, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
             name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
             optimizer=args.optimizer,
-            vlm=args.vlm, vlm_model=args.vlm_model,
+            vlm=args.vlm, vlm_model=args.vlm_model, diagnose=args.diagnose,
         ),
         log=_log,
     )
@@ -116,7 +148,17 @@ def _run_synth(args: Synth) -> None:
         mesh = trimesh.creation.box((args.size_m,) * 3)
     else:
         mesh = trimesh.creation.icosphere(subdivisions=4, radius=args.size_m / 2)
-    config = HeldSampleConfig(name=args.shape, material=args.material, mass_kg=args.mass_kg, seed=args.seed)
+    effect = None
+    if args.effect != "none":
+        import numpy as np
+
+        from pipelines.synth.held import SensorNoise
+        from twin.bench.diagnose import concealed_effect
+
+        effect = concealed_effect(args.effect, args.effect_magnitude, np.random.default_rng(args.seed), SensorNoise())
+        _log(f"concealing {effect.name} {effect.params}")
+    config = HeldSampleConfig(name=args.shape, material=args.material, mass_kg=args.mass_kg, seed=args.seed,
+                              effect=effect)
     _log(f"synthesising {args.shape} into {args.output}")
     make_held_sample(mesh, args.output, config)
     _log(f"wrote {args.output}")
@@ -128,10 +170,16 @@ def main(argv: list[str] | None = None) -> int:
 
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # no per-module load lines in the progress log
-    command = tyro.extras.subcommand_cli_from_dict({"build": Build, "synth": Synth, "bench": Bench}, args=argv)
+    command = tyro.extras.subcommand_cli_from_dict(
+        {"build": Build, "diagnose": Diagnose, "synth": Synth, "bench": Bench}, args=argv)
     try:
         if isinstance(command, Build):
             _run_build(command)
+        elif isinstance(command, Diagnose):
+            from twin.build import DiagnoseRunConfig, diagnose_output
+
+            diagnose_output(DiagnoseRunConfig(command.output, command.logs, command.holdout, command.bootstraps),
+                            log=_log)
         elif isinstance(command, Synth):
             _run_synth(command)
         else:
@@ -139,6 +187,10 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.sample import bench_sample
 
                 bench_sample(command.sample, command.methods)
+            elif command.what == "diagnose":
+                from twin.bench.diagnose import bench_diagnose
+
+                bench_diagnose(command.concealed, command.clean, command.duration_s)
             elif command.what == "crlb":
                 from twin.bench.crlb import bench_crlb
 
