@@ -22,11 +22,11 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from assets import Effect, FitMetrics, Inertial, Pose
-from pipelines.identify.held import windows_from_recordings
 from pipelines.identify.free_body import IdentifyConfig
 from pipelines.identify.inertia import theta_from_physical
 from pipelines.identify.least_squares import NewtonEulerRows, newton_euler_rows, object_frame_from_pi
 from pipelines.identify.rollout import FreeBodyRollout
+from pipelines.identify.windows import make_windows
 
 from .effects import CANDIDATES, NONUNIFORM_DENSITY, effect_vector
 from .residuals import ResidualAnalysis, analyse_residuals, describe
@@ -202,8 +202,9 @@ def _residual(rows: NewtonEulerRows, model: _Model, com_tracked: np.ndarray) -> 
 def _replay(recording, X_tracked_body: Pose, inertial: Inertial, effect: np.ndarray, delay_s: float,
             window_s: float) -> tuple[FitMetrics, dict]:
     """Newton windowed replay of `recording` with the effects; position error and traces."""
-    shifted = replace(recording, wrench=replace(recording.wrench, t_s=recording.wrench.t_s - delay_s))
-    windows = windows_from_recordings([shifted], IdentifyConfig(window_s=window_s, smoothing_hz=None))
+    p, w = recording.pose, recording.wrench
+    windows = make_windows(p.t_s, p.position, p.quat_xyzw, w.t_s - delay_s, w.force, w.torque, window_s=window_s,
+                           substeps=IdentifyConfig().substeps)
     rollout = FreeBodyRollout(windows, X_tracked_body, sets=1, requires_grad=False)
     theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())[None]
     r = rollout.residuals(theta, momentum_scaled=False, effect=effect[None])[:, 0]
