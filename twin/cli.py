@@ -119,6 +119,8 @@ class Bench:
     """Recordings without one (diagnose)."""
     duration_s: float = 3.0
     """Length of each recording [s] (diagnose)."""
+    workshop: bool = False
+    """Diagnose the workshop-tools recordings of ../shared/data instead of synthetic ones (diagnose)."""
 
 
 def _log(message: str) -> None:
@@ -188,9 +190,12 @@ def main(argv: list[str] | None = None) -> int:
 
                 bench_sample(command.sample, command.methods)
             elif command.what == "diagnose":
-                from twin.bench.diagnose import bench_diagnose
+                from twin.bench.diagnose import bench_diagnose, bench_diagnose_workshop
 
-                bench_diagnose(command.concealed, command.clean, command.duration_s)
+                if command.workshop:
+                    bench_diagnose_workshop()
+                else:
+                    bench_diagnose(command.concealed, command.clean, command.duration_s)
             elif command.what == "crlb":
                 from twin.bench.crlb import bench_crlb
 
