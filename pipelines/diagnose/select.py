@@ -263,7 +263,8 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
                                      config.window_s)
 
     effects = []
-    for name in sorted(best, key=lambda n: -screening.inclusion[n]):
+    # most certain first: inclusion probability, then the held-out criterion of the effect alone
+    for name in sorted(best, key=lambda n: (-screening.inclusion[n], scores[n])):
         c = CANDIDATES[name]
         effects.append(Effect(name, c.params(model.coefficients[name]), {
             "inclusion_probability": screening.inclusion[name], "belongs": c.belongs,
