@@ -113,8 +113,7 @@ def newton_euler_rows(
     wt = np.asarray(wrench_t_s)
     w_rate = 1.0 / np.median(np.diff(wt))
     wrench = lowpass(np.hstack([wrench_force, wrench_torque]), cutoff_hz, w_rate)
-    # each sample holds until the next (as the Newton windows apply it): its centre is half a period later
-    wrench = np.stack([np.interp(t, wt + 0.5 / w_rate, wrench[:, k]) for k in range(6)], 1)
+    wrench = np.stack([np.interp(t, wt, wrench[:, k]) for k in range(6)], 1)
 
     keep = (t >= max(t[0], wt[0]) + 0.1) & (t <= min(t[-1], wt[-1]) - 0.1)
     if t_begin_s is not None:
