@@ -68,7 +68,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     from assets.materials import material_range
     from exporters import export_all
     from pipelines.decompose import DecomposeConfig, decompose
-    from pipelines.diagnose import DiagnoseConfig, diagnose_held
+    from pipelines.diagnose import CANDIDATES, DiagnoseConfig, diagnose_held
     from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
     from pipelines.logs import read_recording
     from pipelines.priors import VlmConfig, ask_vlm, describe_object, estimate_prior, scan_image
@@ -123,6 +123,10 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         diagnosis = timer.run("diagnose", diagnose_held, trials, holdout, X_tracked_body, prior.uniform,
                               DiagnoseConfig(window_s=config.window_s))
         _log_diagnosis(diagnosis, log)
+        if any(e.name in CANDIDATES for e in diagnosis.effects):
+            # the identification lacked the effect, so its estimate is biased: the refit with it is kept
+            inertial, fit_final = diagnosis.inertial["after"], diagnosis.fits["after"]
+            fit_baseline = diagnosis.fits["before"]
 
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])

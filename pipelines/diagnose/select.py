@@ -23,7 +23,7 @@ from scipy.optimize import minimize_scalar
 
 from assets import Effect, FitMetrics, Inertial, Pose
 from pipelines.identify.free_body import IdentifyConfig
-from pipelines.identify.inertia import theta_from_physical
+from pipelines.identify.inertia import nearest_physical_inertia, theta_from_physical
 from pipelines.identify.least_squares import NewtonEulerRows, newton_euler_rows, object_frame_from_pi
 from pipelines.identify.rollout import FreeBodyRollout
 from pipelines.identify.windows import make_windows
@@ -182,12 +182,10 @@ def _com_covariance(lib: Library, names, pi: np.ndarray, X_tracked_body: Pose) -
     return (J[:, :10] @ cov[:10, :10] @ J[:, :10].T)[1:4, 1:4]
 
 
-def _physical(inertial: Inertial, prior: Inertial) -> Inertial:
-    """The estimate, or with the prior's inertia (scaled by mass) where least squares gave an unphysical one."""
-    if inertial.physical_violation() is None and inertial.mass > 0:
-        return inertial
-    return Inertial(max(inertial.mass, 1e-6), inertial.com,
-                    prior.inertia_matrix() * (max(inertial.mass, 1e-6) / prior.mass))
+def _physical(inertial: Inertial) -> Inertial:
+    """The least-squares body made replayable (see `nearest_physical_inertia`)."""
+    mass = max(inertial.mass, 1e-9)
+    return Inertial(mass, inertial.com, nearest_physical_inertia(mass, inertial.inertia))
 
 
 def _residual(rows: NewtonEulerRows, model: _Model, com_tracked: np.ndarray) -> np.ndarray:
@@ -251,10 +249,10 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
     density = (mahalanobis > config.com_sigma and np.linalg.norm(shift) > config.com_floor_m
                and scores[chosen] < scores[f"{chosen} (uniform-density COM)"])
 
-    before_inertial = _physical(object_frame_from_pi(baseline.pi, X_tracked_body)[0], prior)
+    before_inertial = _physical(object_frame_from_pi(baseline.pi, X_tracked_body)[0])
     if density:
         before_inertial = replace(before_inertial, com=tuple(prior.com))
-    after_inertial = _physical(found_inertial, prior)
+    after_inertial = _physical(found_inertial)
     evaluation = holdout if holdout is not None else trials[0]
     effect = effect_vector({n: x for n, x in model.coefficients.items() if n != "time_delay"})
     fit_before, trace_before = _replay(evaluation, X_tracked_body, before_inertial, np.zeros_like(effect), 0.0,
