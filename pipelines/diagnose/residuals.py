@@ -20,7 +20,6 @@ from scipy.stats import chi2
 from pipelines.identify.least_squares import NewtonEulerRows
 
 CHANNELS = ("fx", "fy", "fz", "tx", "ty", "tz")
-FEATURES = ("position", "velocity", "sign_velocity", "speed_squared", "gravity")
 
 
 @dataclass(frozen=True)

@@ -81,3 +81,23 @@ def test_concealed_effect_rejects_unknown_name():
         ConcealedEffect("magic", {})
     with pytest.raises(ValueError, match="missing params"):
         ConcealedEffect("time_delay", {})
+
+
+def test_mismatch_no_candidate_explains_is_localised(tmp_path_factory):
+    """A force burst no candidate models (0.15 N over t = 1.2-1.45 s) is reported as unexplained, there."""
+    from dataclasses import replace
+
+    _, (trial, holdout, prior, X_tracked_body) = _case(tmp_path_factory, None, 0.0, 11)
+
+    def burst(recording):
+        w = recording.wrench
+        on = (w.t_s > 1.2) & (w.t_s < 1.45)
+        force = w.force.copy()
+        force[on, 2] += 0.15 * np.sin(np.pi * (w.t_s[on] - 1.2) / 0.25)
+        return replace(recording, wrench=replace(w, force=force))
+
+    diagnosis = diagnose_held([burst(trial)], burst(holdout), X_tracked_body, prior, CONFIG)
+    assert diagnosis.unexplained
+    a, b = diagnosis.unexplained[0]["where"]["t_s"]
+    assert 1.0 < a < 1.3 and 1.35 < b < 1.6
+    assert diagnosis.unexplained[0]["share"] > 0.5
