@@ -5,9 +5,12 @@ with the inertial parameters by least squares on the training recordings, the
 time delay by a scalar search over re-stamped wrench, and scored by the
 Bayesian information criterion of the wrench it predicts on the held-out
 recording (or, without one, over time-blocked cross-validation folds). The
-winner is then run in Newton (effects added by `apply_effect_wrench`, the
-delay by re-stamping) on the evaluation recording in windows started from
-measured states, before and after, which is the position error reported.
+winner's force and bias parameters are then refitted in Newton (Gauss-Newton
+through rollouts of the trials' shooting windows, effects added by
+`apply_effect_wrench`, the delay by re-stamping), and the winner is replayed
+on the evaluation recording in windows started from measured states, before
+and after, which is the position error reported; the Newton values are kept
+where that replay is better with them than with the least-squares ones.
 A COM away from the uniform-density prior's is `nonuniform_density` when it is
 significant and wins on held-out data too. What the chosen model still leaves
 in stretches of time is reported as unexplained.
