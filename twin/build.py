@@ -11,7 +11,7 @@ import json
 import shutil
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Literal
 
@@ -43,6 +43,8 @@ class BuildConfig:
     vlm_model: str | None = None
     kind: Literal["free", "sliding", "prismatic", "revolute"] | None = None
     base_mesh: Path | None = None
+    diagnose: bool = True
+    """Free bodies: look for missing physics after identification (pipelines/diagnose)."""
     topics: tuple[tuple[str, str], ...] = ()
     """(role, topic) overrides for reading the recordings."""
     frames: tuple[tuple[str, str], ...] = ()
@@ -83,6 +85,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     from assets.materials import material_range
     from exporters import export_all
     from pipelines.decompose import DecomposeConfig, decompose
+    from pipelines.diagnose import CANDIDATES, DiagnoseConfig, diagnose_held
     from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
     from pipelines.priors import VlmConfig, ask_vlm, describe_object, estimate_prior, scan_image
     from pipelines.validate import validate_exports
@@ -130,6 +133,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         return build_jointed(config, trials, holdout, detection, mesh_object, placement, parts, prior, name,
                              scan_stats, timer, log, t_start)
 
+    diagnosis = None
     if detection.kind == "sliding":
         theta, fit, identify_provenance, loss_history, traces = timer.run(
             "identify", _identify_sliding, trials, holdout, mesh_object, prior
@@ -146,6 +150,14 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             log("the Newton fit does not predict the held-out recording significantly better: keeping least squares")
         inertial, covariance = held.inertial, held.covariance
         fit_baseline, fit_final = held.fits["baseline"], held.fits[held.selected]
+        if config.diagnose:
+            diagnosis = timer.run("diagnose", diagnose_held, trials, holdout, X_tracked_body, prior.uniform,
+                                  DiagnoseConfig(window_s=config.window_s))
+            _log_diagnosis(diagnosis, log)
+            if any(e.name in CANDIDATES for e in diagnosis.effects):
+                # the identification lacked the effect, so its estimate is biased: the refit with it is kept
+                inertial, fit_final = diagnosis.inertial["after"], diagnosis.fits["after"]
+                fit_baseline = diagnosis.fits["before"]
 
         std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
         inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])
@@ -163,6 +175,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         loss_history, traces = held.loss_history, held.traces
         identify_provenance = {
             "identify": {"method": config.method, **held.provenance()},
+            **({"diagnose": diagnosis.provenance()} if diagnosis else {}),
             "tracked_frame_in_object": {"position": list(X_tracked_body.inverse().position),
                                         "quaternion_xyzw": list(X_tracked_body.inverse().quaternion_xyzw)},
         }
@@ -186,6 +199,8 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             geometry=Geometry("meshes/visual.obj", tuple(collision)),
             material=Material(material.name, float(theta.mass.value / mesh_object.volume), theta.friction.value),
             fit=fit,
+            effects=diagnosis.effects if diagnosis else (),
+            unexplained=diagnosis.unexplained if diagnosis else (),
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), "report": "report.html"}
@@ -204,7 +219,8 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         write_asset(asset, tmp / "asset.json")
         from twin.report import write_report
 
-        write_report(tmp / "report.html", asset_to_json(asset), loss_history, traces)
+        write_report(tmp / "report.html", asset_to_json(asset), loss_history, traces,
+                     diagnosis.traces if diagnosis else None)
         _replace_dir(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -249,6 +265,73 @@ def _identify_sliding(trials, holdout, mesh_object, prior):
     metrics = {k: FitMetrics(*v) for k, v in (("baseline", pushed.baseline), ("final", pushed.final))}
     return (theta, Fit(metrics["baseline"], metrics["final"], config.window_s), {"identify": pushed.provenance()},
             fit.loss_history, pushed.traces)
+
+
+def _log_diagnosis(diagnosis, log) -> None:
+    for line in diagnosis.findings[:6]:
+        log(f"  residual: {line}")
+    fits = diagnosis.fits
+    for e in diagnosis.effects:
+        log(f"  effect {e.name}: {e.params}")
+    if diagnosis.effects:
+        log(f"  held-out position RMSE {1000 * fits['before'].rmse_position_m:.3f} -> "
+            f"{1000 * fits['after'].rmse_position_m:.3f} mm")
+    else:
+        log("  no effect improves the held-out prediction")
+    for u in diagnosis.unexplained:
+        log(f"  unexplained: {u['summary']}")
+
+
+@dataclass(frozen=True)
+class DiagnoseRunConfig:
+    """`twin diagnose`: the diagnose stage alone on a built OUT and recordings."""
+
+    output: Path
+    logs: tuple[Path, ...]
+    holdout: Path | None = None
+    bootstraps: int = 40
+
+
+def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = print) -> Path:
+    """Diagnose the asset in config.output against recordings; rewrite its asset.json and report.html.
+
+    The identified parameters stay as built; effects, unexplained and provenance.diagnose are replaced.
+    """
+    from assets import Inertial, Pose, asset_to_json, read_asset, write_asset
+    from pipelines.diagnose import DiagnoseConfig, diagnose_held
+    from pipelines.logs import read_recording
+    from twin.report import write_report
+
+    out = Path(config.output)
+    if not (out / "asset.json").is_file():
+        raise BuildError(f"{out}/asset.json: not found; run `twin build` into {out} first")
+    if not config.logs:
+        raise BuildError("no recording given: pass --logs TRIAL.mcap")
+    for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
+        if not Path(path).is_file():
+            raise BuildError(f"{path}: recording not found")
+    asset = read_asset(out / "asset.json")
+    provenance = asset.provenance
+    try:
+        uniform = provenance["prior"]["uniform"]
+        tracked = provenance["tracked_frame_in_object"]
+    except KeyError as exc:
+        raise BuildError(f"{out}/asset.json: provenance lacks {exc}; rebuild it with this version of twin") from exc
+    prior = Inertial(uniform["mass_kg"], tuple(uniform["com_m"]), np.asarray(uniform["inertia_kg_m2"]))
+    X_tracked_body = Pose(tuple(tracked["position"]), tuple(tracked["quaternion_xyzw"])).inverse()
+    trials = [read_recording(p) for p in config.logs]
+    holdout = read_recording(config.holdout) if config.holdout else None
+    diagnosis = diagnose_held(trials, holdout, X_tracked_body, prior,
+                              DiagnoseConfig(bootstraps=config.bootstraps,
+                                             window_s=asset.fit.window_s if asset.fit else 0.1))
+    _log_diagnosis(diagnosis, log)
+    run = {"logs": [str(p) for p in config.logs], "holdout": str(config.holdout) if config.holdout else None}
+    asset = replace(asset, effects=diagnosis.effects, unexplained=diagnosis.unexplained,
+                          provenance={**provenance, "diagnose": diagnosis.provenance() | {"run": run}})
+    write_asset(asset, out / "asset.json")
+    write_report(out / "report.html", asset_to_json(asset), (), None, diagnosis.traces)
+    log(f"updated {out}/asset.json and report.html")
+    return out
 
 
 def _object_mesh(config: BuildConfig):

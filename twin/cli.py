@@ -54,6 +54,8 @@ class Build:
     """Fixed sensor-to-world rotation of the wrench messages, quaternion x y z w (when the sensor frame is not in /tf)."""
     wrench_reaction: bool = False
     """The wrench messages give the force ON the sensor (a tool-mounted F/T sensor's reading): negate it."""
+    diagnose: bool = True
+    """Run the diagnose stage after identification (--no-diagnose skips it)."""
 
 
 @dataclass(frozen=True)
@@ -62,6 +64,23 @@ class Inspect:
 
     file: tyro.conf.Positional[Path]
     """The .mcap file (or a rosbag2 directory holding one)."""
+
+
+@dataclass(frozen=True)
+class Diagnose:
+    """Find physics the identified model lacks: residual analysis, candidate effects, choice on held-out data.
+
+    Updates OUT/asset.json (effects, unexplained, provenance.diagnose) and OUT/report.html.
+    """
+
+    output: tyro.conf.Positional[Path]
+    """A directory written by `twin build`."""
+    logs: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
+    """MCAP recording of an interaction; repeat for several trials."""
+    holdout: Path | None = None
+    """MCAP recording kept out of the fit; chooses among candidates (else time-blocked cross-validation)."""
+    bootstraps: int = 40
+    """Block-bootstrap resamples of the screening."""
 
 
 @dataclass(frozen=True)
@@ -78,6 +97,11 @@ class Synth:
     mass_kg: float = 0.02
     material: str = "pla_printed"
     seed: int = 0
+    effect: Literal["none", "sensor_bias", "time_delay", "viscous_damping", "quadratic_drag",
+                    "nonuniform_density"] = "none"
+    """Physics to conceal in both recordings (the model twin starts from lacks it)."""
+    effect_magnitude: float = 2.0
+    """Size of the concealed effect as a multiple of the sensor's noise (see twin/bench/diagnose.py)."""
 
 
 @dataclass(frozen=True)
@@ -93,9 +117,11 @@ class Bench:
     reconstruct: scans of real meshes and primitives (3-30 cm, two noise levels) against their truth; real Kinect frames.
     push: synthetic pushes with known friction (--seeds of them): friction, mass and yaw inertia errors.
     push-real: the MIT block pushes: friction per trial and its spread, quasi-static estimate, predictive validity.
+    diagnose: --concealed recordings with a hidden effect of random size and --clean ones, shuffled: effect found?
     """
 
-    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct", "push", "push-real"]]
+    what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct",
+                                       "push", "push-real", "diagnose"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -115,6 +141,14 @@ class Bench:
     """A subset that runs in about a minute (reconstruct)."""
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
+    concealed: int = 40
+    """Recordings with a concealed effect (diagnose)."""
+    clean: int = 10
+    """Recordings without one (diagnose)."""
+    duration_s: float = 3.0
+    """Length of each recording [s] (diagnose)."""
+    workshop: bool = False
+    """Diagnose the workshop-tools recordings of ../shared/data instead of synthetic ones (diagnose)."""
 
 
 def _log(message: str) -> None:
@@ -132,6 +166,7 @@ def _run_build(args: Build) -> None:
             vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind, base_mesh=args.base_mesh,
             topics=_role_map(args.topic, "--topic"), frames=_role_map(args.frame, "--frame"),
             wrench_rotation_xyzw=args.wrench_rotation, wrench_reaction=args.wrench_reaction,
+            diagnose=args.diagnose,
         ),
         log=_log,
     )
@@ -178,7 +213,17 @@ def _run_synth(args: Synth) -> None:
         mesh = trimesh.creation.box((args.size_m,) * 3)
     else:
         mesh = trimesh.creation.icosphere(subdivisions=4, radius=args.size_m / 2)
-    config = HeldSampleConfig(name=args.shape, material=args.material, mass_kg=args.mass_kg, seed=args.seed)
+    effect = None
+    if args.effect != "none":
+        import numpy as np
+
+        from pipelines.synth.held import SensorNoise
+        from twin.bench.diagnose import concealed_effect
+
+        effect = concealed_effect(args.effect, args.effect_magnitude, np.random.default_rng(args.seed), SensorNoise())
+        _log(f"concealing {effect.name} {effect.params}")
+    config = HeldSampleConfig(name=args.shape, material=args.material, mass_kg=args.mass_kg, seed=args.seed,
+                              effect=effect)
     _log(f"synthesising {args.shape} into {args.output}")
     make_held_sample(mesh, args.output, config)
     _log(f"wrote {args.output}")
@@ -190,12 +235,18 @@ def main(argv: list[str] | None = None) -> int:
 
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # no per-module load lines in the progress log
-    command = tyro.extras.subcommand_cli_from_dict({"build": Build, "inspect": Inspect, "synth": Synth, "bench": Bench}, args=argv)
+    command = tyro.extras.subcommand_cli_from_dict(
+        {"build": Build, "diagnose": Diagnose, "inspect": Inspect, "synth": Synth, "bench": Bench}, args=argv)
     try:
         if isinstance(command, Build):
             _run_build(command)
         elif isinstance(command, Inspect):
             _run_inspect(command)
+        elif isinstance(command, Diagnose):
+            from twin.build import DiagnoseRunConfig, diagnose_output
+
+            diagnose_output(DiagnoseRunConfig(command.output, command.logs, command.holdout, command.bootstraps),
+                            log=_log)
         elif isinstance(command, Synth):
             _run_synth(command)
         else:
@@ -203,6 +254,13 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.sample import bench_sample
 
                 bench_sample(command.sample, command.methods)
+            elif command.what == "diagnose":
+                from twin.bench.diagnose import bench_diagnose, bench_diagnose_workshop
+
+                if command.workshop:
+                    bench_diagnose_workshop()
+                else:
+                    bench_diagnose(command.concealed, command.clean, command.duration_s)
             elif command.what == "crlb":
                 from twin.bench.crlb import bench_crlb
 

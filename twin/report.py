@@ -61,14 +61,73 @@ def _loss_plot(loss_history) -> str:
     return _figure_png(fig)
 
 
+def _diagnosis_plots(traces: dict) -> str:
+    """Wrench residual (noise units) and position error over time, before and after the chosen effects."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    t = np.asarray(traces["residual_t_s"])
+    for ax, part, label in ((axes[0], slice(0, 3), "force"), (axes[1], slice(3, 6), "torque")):
+        for key, color in (("residual_before", "tab:red"), ("residual_after", "tab:blue")):
+            r = np.linalg.norm(np.asarray(traces[key])[:, part], axis=1)
+            ax.plot(t, r, lw=0.8, color=color, label=key.split("_")[1])
+        ax.set_ylabel(f"|{label} residual| [noise]")
+    axes[0].legend(loc="upper right")
+    axes[0].set_title("Wrench the model leaves unexplained, before and after the chosen effects")
+    tp = np.asarray(traces["t_s"])
+    order = np.argsort(tp, kind="stable")
+    measured = np.asarray(traces["measured_position"])
+    for key, color in (("before_position", "tab:red"), ("after_position", "tab:blue")):
+        err = np.linalg.norm(np.asarray(traces[key]) - measured, axis=1)
+        axes[2].semilogy(tp[order], np.maximum(err[order], 1e-7), ".", ms=2, color=color, label=key.split("_")[0])
+    axes[2].set_ylabel("position error [m]")
+    axes[2].set_xlabel("time [s]")
+    axes[2].legend(loc="upper right", markerscale=4)
+    return _figure_png(fig)
+
+
+def diagnosis_section(asset: dict, traces: dict | None) -> str:
+    """The diagnose stage's findings: effects, unexplained mismatches, residual analysis, fit before/after."""
+    d = asset.get("provenance", {}).get("diagnose")
+    if not d:
+        return ""
+    effects = "".join(
+        f"<tr><td>{html.escape(e['name'])}</td><td>{_fmt(e['params'])}</td>"
+        f"<td>{_fmt(e['evidence'].get('inclusion_probability', ''))}</td>"
+        f"<td>{html.escape(str(e['evidence'].get('belongs', '')))}</td></tr>"
+        for e in asset.get("effects", [])
+    ) or "<tr><td colspan=4>none: no candidate improves the held-out prediction</td></tr>"
+    unexplained = "".join(f"<li>{html.escape(u['summary'])}</li>" for u in asset.get("unexplained", [])) or "<li>none</li>"
+    findings = "".join(f"<li>{html.escape(f)}</li>" for f in d.get("findings", [])) or "<li>residual white</li>"
+    inclusion = ", ".join(f"{html.escape(k)} {v:.2f}" for k, v in d["screening"]["inclusion"].items())
+    fits = "".join(f"<tr><td>{k}</td><td>{v['rmse_position_m'] * 1000:.3f}</td><td>{v['rmse_rotation_rad']:.5f}</td>"
+                   "</tr>" for k, v in d["fits"].items())
+    plot = f'<img src="data:image/png;base64,{_diagnosis_plots(traces)}">' if traces else ""
+    return f"""<h2>Diagnosis ({html.escape(d['evaluation'])})</h2>
+<table><tr><th>effect</th><th>params (SI)</th><th>inclusion probability</th><th>belongs to</th></tr>{effects}</table>
+<p>Screening inclusion probabilities: {inclusion}</p>
+<h3>Unexplained</h3><ul>{unexplained}</ul>
+<h3>Residual before diagnosis</h3><ul>{findings}</ul>
+<table><tr><th>Newton replay</th><th>RMSE position [mm]</th><th>RMSE rotation [rad]</th></tr>{fits}</table>
+{plot}
+"""
+
+
 def _fmt(x) -> str:
     if isinstance(x, (list, tuple)):
         return "[" + ", ".join(_fmt(v) for v in x) + "]"
+    if isinstance(x, dict):
+        return ", ".join(f"{html.escape(k)}={_fmt(v)}" for k, v in x.items())
     return f"{x:.5g}" if isinstance(x, float) else html.escape(str(x))
 
 
-def write_report(path: Path, asset: dict, loss_history, traces: dict) -> None:
-    """Write a self-contained HTML report (plots embedded as PNG)."""
+def write_report(path: Path, asset: dict, loss_history, traces: dict | None,
+                 diagnosis_traces: dict | None = None) -> None:
+    """Write a self-contained HTML report (plots embedded as PNG); `traces` None (a diagnosis alone) leaves
+    out the identification's replay plot."""
     theta = asset["theta"]
     rows = "".join(
         f"<tr><td>{k}</td><td>{_fmt(v['value'])}</td><td>{_fmt(v['std'])}</td><td>{v.get('source', '')}</td></tr>"
@@ -90,6 +149,7 @@ def write_report(path: Path, asset: dict, loss_history, traces: dict) -> None:
     time_rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v:.2f}</td></tr>" for k, v in timings.items())
     loss_img = f'<img src="data:image/png;base64,{_loss_plot(loss_history)}">' if len(loss_history) else (
         "<p>Least-squares method: no iterative loss.</p>")
+    trajectory_img = f'<img src="data:image/png;base64,{_trajectory_plot(traces)}">' if traces else ""
     doc = f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>twin: {html.escape(asset['name'])}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}table{{border-collapse:collapse}}
@@ -99,8 +159,9 @@ td,th{{border:1px solid #ccc;padding:3px 8px;font-size:90%}}</style></head><body
 <table><tr><th>parameter</th><th>value</th><th>std</th><th>source</th></tr>{rows}</table>
 <h2>Fit (window {fit.get('window_s', 0):.2f} s)</h2>
 <table><tr><th></th><th>RMSE position [mm]</th><th>RMSE rotation [rad]</th><th>loss</th></tr>{fit_rows}</table>
-<img src="data:image/png;base64,{_trajectory_plot(traces)}">
+{trajectory_img}
 <h2>Loss</h2>{loss_img}
+{diagnosis_section(asset, diagnosis_traces)}
 <h2>Exported files read back</h2>
 <table><tr><th>loader</th><th>mass [kg]</th><th>max relative error</th><th></th></tr>{val_rows}</table>
 <h2>Stage timings [s]</h2><table>{time_rows}</table>

@@ -16,7 +16,7 @@ import numpy as np
 from assets import FitMetrics, Inertial, Pose
 
 from .free_body import Identification, IdentifyConfig, InertialBounds, identify_free_body, prior_starts
-from .inertia import theta_from_physical
+from .inertia import nearest_physical_inertia, theta_from_physical
 from .least_squares import LeastSquaresResult, identify_least_squares
 from .rollout import FreeBodyRollout
 from .windows import ShootingWindows, concat_windows, make_windows
@@ -94,7 +94,10 @@ def identify_held(
         rec.pose.t_s, rec.pose.position, rec.pose.quat_xyzw, rec.wrench.t_s, rec.wrench.force, rec.wrench.torque,
         X_tracked_body,
     )
-    candidates = {"baseline": prior, "least_squares": ls.inertial}
+    # least squares is unconstrained; a body that breaks the triangle inequality cannot be replayed
+    ls_body = Inertial(ls.inertial.mass, ls.inertial.com, nearest_physical_inertia(ls.inertial.mass,
+                                                                                   ls.inertial.inertia))
+    candidates = {"baseline": prior, "least_squares": ls_body}
     newton = None
     if method == "newton":
         newton = identify_free_body(windows_from_recordings(trials, config), X_tracked_body,
@@ -106,7 +109,7 @@ def identify_held(
     selected = "newton" if method == "newton" else "least_squares"
     if holdout is not None and method == "newton" and not _predicts_better(window_impulse, "newton", "least_squares"):
         selected = "least_squares"
-    inertial, covariance = (newton.inertial, newton.covariance) if selected == "newton" else (ls.inertial,
+    inertial, covariance = (newton.inertial, newton.covariance) if selected == "newton" else (ls_body,
                                                                                               ls.covariance)
     traces = {"t_s": traces["t_s"], "measured_position": traces["measured_position"], "window_s": traces["window_s"],
               "baseline_position": traces["baseline_position"], "final_position": traces[f"{selected}_position"]}

@@ -47,6 +47,18 @@ def theta_from_physical(mass: float, com, inertia) -> np.ndarray:
     )
 
 
+def nearest_physical_inertia(mass: float, inertia, margin: float = 1e-3) -> np.ndarray:
+    """The inertia [kg m^2] with its second-moment matrix S = (tr(I)/2 - I)/m clipped to at least
+    `margin` x its largest eigenvalue, so `theta_from_physical` accepts it; unchanged when already so."""
+    I = 0.5 * (np.asarray(inertia, dtype=float) + np.asarray(inertia, dtype=float).T)
+    e, V = np.linalg.eigh((0.5 * np.trace(I) * np.eye(3) - I) / mass)
+    floor = margin * max(e.max(), 1e-30)
+    if e.min() >= floor:
+        return I
+    S = V @ np.diag(np.maximum(e, floor)) @ V.T
+    return mass * (np.trace(S) * np.eye(3) - S)
+
+
 def physical_jacobian(theta: np.ndarray, eps: float = 1e-7) -> np.ndarray:
     """d(mass, com[3], inertia[6: xx yy zz xy xz yz]) / d theta, shape [10, 10], central differences."""
     theta = np.asarray(theta, dtype=float)

@@ -105,6 +105,41 @@ def apply_measured_wrench(
     body_f[b] = wp.spatial_vector(f, tau + wp.cross(arm, f))
 
 
+EFFECT_SIZE = 9
+"""Effect parameters per set: sensor bias force [N] and torque [N m] (tracked-frame axes), viscous
+damping b [N s/m] and b_angular [N m s/rad], quadratic drag c [N s^2/m^2]."""
+
+
+@wp.kernel
+def apply_effect_wrench(
+    body_q: wp.array[wp.transform],
+    body_qd: wp.array[wp.spatial_vector],
+    body_com: wp.array[wp.vec3],
+    X_body_tracked: wp.transform,
+    effect: wp.array2d[float],
+    windows_per_set: int,
+    body_f: wp.array[wp.spatial_vector],
+):
+    """Add the candidate effects to the applied wrench (world axes, about the COM).
+
+    The sensor reads applied + bias in its own (tracked) axes, so the bias is taken off
+    the measured wrench at the tracked origin; damping -b v_com, -b_angular omega and
+    drag -c |v_com| v_com act at the COM.
+    """
+    b = wp.tid()
+    k = b // windows_per_set
+    X = body_q[b]
+    R_tracked = wp.transform_get_rotation(X * X_body_tracked)
+    bias_f = wp.quat_rotate(R_tracked, wp.vec3(effect[k, 0], effect[k, 1], effect[k, 2]))
+    bias_tau = wp.quat_rotate(R_tracked, wp.vec3(effect[k, 3], effect[k, 4], effect[k, 5]))
+    arm = wp.transform_point(X, wp.transform_get_translation(X_body_tracked)) - wp.transform_point(X, body_com[b])
+    v = wp.spatial_top(body_qd[b])
+    omega = wp.spatial_bottom(body_qd[b])
+    f = -bias_f - effect[k, 6] * v - effect[k, 8] * wp.length(v) * v
+    tau = -bias_tau - wp.cross(arm, bias_f) - effect[k, 7] * omega
+    body_f[b] = body_f[b] + wp.spatial_vector(f, tau)
+
+
 @wp.kernel
 def eval_tracked_pose_error(
     body_q: wp.array[wp.transform],

@@ -70,20 +70,40 @@ def newton_euler_regressor(accel_minus_gravity, omega, alpha) -> np.ndarray:
     return A
 
 
-def identify_least_squares(
-    pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque,
-    X_tracked_body: Pose, *, cutoff_hz: float = 12.0, t_begin_s: float | None = None, block_s: float = 0.1,
-) -> LeastSquaresResult:
-    """Fit pi by weighted least squares; wrench in world axes about the tracked origin.
+@dataclass(frozen=True)
+class NewtonEulerRows:
+    """The regression of one recording on the smoothed grid, tracked-frame axes.
 
-    Force and torque rows are weighted by their noise levels, estimated from
-    the recording. The covariance is a sandwich over blocks of `block_s`
-    (filtered noise is correlated within a block, nearly independent across).
+    A [N, 6, 10] and measured wrench b [N, 6] (force [N], torque about the tracked origin [N m]);
+    scale [6]: 1/noise per row; t_s [N]; position [N, 3] of the tracked origin in world [m];
+    velocity [N, 3] of the tracked origin [m/s],
+    omega [N, 3] [rad/s], gravity [N, 3] (gravity direction times 9.81 [m/s^2]), all in
+    tracked axes; rate_hz of the grid; cutoff_hz of the low-pass.
+    """
+
+    t_s: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    scale: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    omega: np.ndarray
+    gravity: np.ndarray
+    rate_hz: float
+    cutoff_hz: float
+
+
+def newton_euler_rows(
+    pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque, *,
+    cutoff_hz: float = 12.0, t_begin_s: float | None = None,
+) -> NewtonEulerRows:
+    """Regressor and measured wrench of a recording; wrench in world axes about the tracked origin.
+
+    Rows within 0.1 s of either stream's ends are dropped (filter edge effects).
     """
     noise = estimate_noise_levels(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque)
     t, pos_f, rot_f = smoothed_pose_grid(pose_t_s, np.asarray(pose_position), np.asarray(pose_quat_xyzw), cutoff_hz)
     dt = t[1] - t[0]
-    rate = 1.0 / dt
     vel = np.gradient(pos_f, dt, axis=0)
     acc = np.gradient(vel, dt, axis=0)
     omega = (rot_f[2:] * rot_f[:-2].inv()).as_rotvec() / (2 * dt)  # world axes
@@ -102,16 +122,32 @@ def identify_least_squares(
     a_g = R_inv.apply(acc[keep] - GRAVITY_M_S2)
     w_b = R_inv.apply(omega[keep])
     al_b = R_inv.apply(alpha[keep])
-    f_b = R_inv.apply(wrench[keep, :3])
-    tau_b = R_inv.apply(wrench[keep, 3:])
-    n = int(keep.sum())
-    A = newton_euler_regressor(a_g, w_b, al_b)
-    b = np.concatenate([f_b, tau_b], axis=1)
-    scale = np.array([1 / noise.force_n] * 3 + [1 / noise.torque_nm] * 3)
-    As = (A * scale[None, :, None]).reshape(-1, 10)
-    bs = (b * scale).reshape(-1)
+    b = np.concatenate([R_inv.apply(wrench[keep, :3]), R_inv.apply(wrench[keep, 3:])], axis=1)
+    return NewtonEulerRows(
+        t_s=t[keep], A=newton_euler_regressor(a_g, w_b, al_b), b=b,
+        scale=np.array([1 / noise.force_n] * 3 + [1 / noise.torque_nm] * 3), position=pos_f[keep],
+        velocity=R_inv.apply(vel[keep]), omega=w_b, gravity=R_inv.apply(np.tile(GRAVITY_M_S2, (int(keep.sum()), 1))),
+        rate_hz=1.0 / dt, cutoff_hz=cutoff_hz,
+    )
+
+
+def identify_least_squares(
+    pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque,
+    X_tracked_body: Pose, *, cutoff_hz: float = 12.0, t_begin_s: float | None = None, block_s: float = 0.1,
+) -> LeastSquaresResult:
+    """Fit pi by weighted least squares; wrench in world axes about the tracked origin.
+
+    Force and torque rows are weighted by their noise levels, estimated from
+    the recording. The covariance is a sandwich over blocks of `block_s`
+    (filtered noise is correlated within a block, nearly independent across).
+    """
+    rows = newton_euler_rows(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque,
+                             cutoff_hz=cutoff_hz, t_begin_s=t_begin_s)
+    n = len(rows.t_s)
+    As = (rows.A * rows.scale[None, :, None]).reshape(-1, 10)
+    bs = (rows.b * rows.scale).reshape(-1)
     pi, *_ = np.linalg.lstsq(As, bs, rcond=None)
-    rows_per_block = 6 * max(1, int(round(block_s * rate)))
+    rows_per_block = 6 * max(1, int(round(block_s * rows.rate_hz)))
     scores = (As * (bs - As @ pi)[:, None])
     blocks = np.add.reduceat(scores, np.arange(0, len(bs), rows_per_block), axis=0)
     H_inv = np.linalg.pinv(As.T @ As)

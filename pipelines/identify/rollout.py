@@ -8,6 +8,8 @@ from assets import Pose
 
 from .inertia import THETA_SIZE
 from .kernels import (
+    EFFECT_SIZE,
+    apply_effect_wrench,
     apply_measured_wrench,
     assign_inertial_params_to_model,
     eval_tracked_pose_error,
@@ -66,6 +68,8 @@ class FreeBodyRollout:
         self.wrench = wp.array(windows.wrench.astype(np.float32), dtype=wp.spatial_vector, device=device)
 
         self.theta = wp.zeros((sets, THETA_SIZE), dtype=float, device=device, requires_grad=requires_grad)
+        self.effect = wp.zeros((sets, EFFECT_SIZE), dtype=float, device=device, requires_grad=requires_grad)
+        self.with_effects = False
         self.correction = wp.zeros(sets * W, dtype=wp.spatial_vector, device=device, requires_grad=requires_grad)
         self.correction_rate = wp.zeros(sets * W, dtype=wp.spatial_vector, device=device,
                                         requires_grad=requires_grad)
@@ -79,6 +83,7 @@ class FreeBodyRollout:
 
     def _load(self, theta: np.ndarray, correction: np.ndarray | None, correction_rate: np.ndarray | None):
         shape = (self.sets * self.windows.window_count, 6)
+        self.with_effects = False
         self.theta.assign(np.asarray(theta, dtype=np.float32).reshape(self.sets, THETA_SIZE))
         for array, value in ((self.correction, correction), (self.correction_rate, correction_rate)):
             array.assign(np.zeros(shape, np.float32) if value is None else np.asarray(value, np.float32).reshape(shape))
@@ -109,6 +114,14 @@ class FreeBodyRollout:
                 outputs=[s.body_f],
                 device=self.device,
             )
+            if self.with_effects:
+                wp.launch(
+                    apply_effect_wrench,
+                    dim=model.body_count,
+                    inputs=[s.body_q, s.body_qd, model.body_com, self.X_body_tracked, self.effect, W],
+                    outputs=[s.body_f],
+                    device=self.device,
+                )
             self.solver.step(s, s_next, self.control, None, w.dt_s)
             if (step + 1) % w.substeps == 0:
                 sample = (step + 1) // w.substeps
@@ -140,10 +153,18 @@ class FreeBodyRollout:
             self._graphs[key] = capture.graph
         wp.capture_launch(self._graphs[key])
 
-    def residuals(self, theta, correction=None, correction_rate=None, momentum_scaled=True) -> np.ndarray:
-        """Tracked-frame errors [S, sets, W, 6] for samples 1..S: see `eval_tracked_pose_error`."""
+    def residuals(self, theta, correction=None, correction_rate=None, momentum_scaled=True,
+                  effect: np.ndarray | None = None) -> np.ndarray:
+        """Tracked-frame errors [S, sets, W, 6] for samples 1..S: see `eval_tracked_pose_error`.
+
+        effect [sets, EFFECT_SIZE]: candidate effects added by `apply_effect_wrench` (None: none).
+        """
         self._load(theta, correction, correction_rate)
-        self._run(("forward", momentum_scaled), lambda: self._forward(momentum_scaled))
+        if effect is not None:
+            self.effect.assign(np.asarray(effect, np.float32).reshape(self.sets, EFFECT_SIZE))
+            self.with_effects = True
+        key = ("forward", momentum_scaled, self.with_effects)
+        self._run(key, lambda: self._forward(momentum_scaled))
         S, W = self.windows.sample_count, self.windows.window_count
         return self.residual.numpy()[1:].astype(float).reshape(S, self.sets, W, 6)
 

@@ -62,6 +62,43 @@ class SensorNoise:
 
 
 @dataclass(frozen=True)
+class ConcealedEffect:
+    """Physics the recording carries and the model does not (DESIGN.md names; params in SI).
+
+    viscous_damping {b, b_angular} and quadratic_drag {c} act on the body in the simulation;
+    sensor_bias {force, torque} (grasp-frame axes) and time_delay {seconds} act on the
+    sensor; nonuniform_density {com_shift} moves the true COM off the uniform-density one.
+    """
+
+    name: str
+    params: dict
+
+    def __post_init__(self):
+        if self.name not in EFFECT_PARAMS:
+            raise ValueError(f"ConcealedEffect.name: expected one of {tuple(EFFECT_PARAMS)}, got {self.name!r}")
+        missing = set(EFFECT_PARAMS[self.name]) - set(self.params)
+        if missing:
+            raise ValueError(f"ConcealedEffect {self.name}: missing params {sorted(missing)}")
+
+    def body_wrench(self, v_com: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        """Force [N] and torque [N m] about the COM, world axes, that the effect puts on the body."""
+        if self.name == "viscous_damping":
+            return np.concatenate([-self.params["b"] * v_com, -self.params["b_angular"] * omega])
+        if self.name == "quadratic_drag":
+            return np.concatenate([-self.params["c"] * np.linalg.norm(v_com) * v_com, np.zeros(3)])
+        return np.zeros(6)
+
+
+EFFECT_PARAMS = {
+    "viscous_damping": ("b", "b_angular"),
+    "quadratic_drag": ("c",),
+    "sensor_bias": ("force", "torque"),
+    "time_delay": ("seconds",),
+    "nonuniform_density": ("com_shift",),
+}
+
+
+@dataclass(frozen=True)
 class HeldMotion:
     """What happened, noise-free. World frame; the grasp frame is the tracked frame.
 
@@ -123,11 +160,13 @@ def simulate_held(
     config: HeldMotionConfig,
     rng: np.random.Generator,
     device: str = "cpu",
+    effect: ConcealedEffect | None = None,
 ) -> HeldMotion:
     """Simulate the held object in Newton (SemiImplicit, no damping) under the controller.
 
     inertial: true parameters in the object frame; placement: object frame in world
-    at t = 0; grasp: grasp (tracked) frame in the object frame.
+    at t = 0; grasp: grasp (tracked) frame in the object frame. effect: a body effect
+    (damping, drag) the controller does not know of, added to the applied wrench.
     """
     import newton
     import warp as wp
@@ -191,6 +230,9 @@ def simulate_held(
             Rj = Rotation.from_quat(qj[3:7])
             arm = Rj.apply(T_grasp[:3, 3] - com_obj)
             body_f[body] = np.concatenate([f, torque_grasp[k] + np.cross(arm, f)])
+            if effect is not None:
+                qdj = state_a.body_qd.numpy()[body].astype(float)
+                body_f[body] += effect.body_wrench(qdj[:3], qdj[3:6])
             state_a.body_f.assign(body_f)
             solver.step(state_a, state_b, control, None, sim_dt)
             state_a, state_b = state_b, state_a
@@ -207,13 +249,15 @@ def simulate_held(
     )
 
 
-def measure(motion: HeldMotion, noise: SensorNoise, rng: np.random.Generator):
+def measure(motion: HeldMotion, noise: SensorNoise, rng: np.random.Generator,
+            effect: ConcealedEffect | None = None):
     """Sensor readings of a motion: (t_pose_s, position, quat_xyzw, t_wrench_s, force, torque).
 
     Poses at the tracker's rate and phase with Gaussian position noise and a
     random small rotation; force and torque in the grasp frame's axes, as a
     wrist sensor reports them, with Gaussian noise and quantisation at the
-    sensor's resolution.
+    sensor's resolution. effect: a sensor effect; sensor_bias adds to the
+    reading, time_delay stamps the wrench late (stamp t acted at t - seconds).
     """
     sim_dt = motion.t_s[1] - motion.t_s[0]
     t_pose = np.arange(noise.pose_time_offset_s, motion.t_s[-1], 1.0 / noise.pose_rate_hz)
@@ -226,9 +270,17 @@ def measure(motion: HeldMotion, noise: SensorNoise, rng: np.random.Generator):
     R_grasp = Rotation.from_quat(motion.grasp_quat_xyzw[widx])
     force = R_grasp.inv().apply(motion.force_n)
     torque = R_grasp.inv().apply(motion.torque_nm)
+    t_wrench = motion.t_wrench_s
+    if effect is not None and effect.name == "sensor_bias":
+        force = force + np.asarray(effect.params["force"])
+        torque = torque + np.asarray(effect.params["torque"])
+    if effect is not None and effect.name == "time_delay":
+        t_wrench = t_wrench + effect.params["seconds"]
+        late = t_wrench >= 0  # a leading stream starts early: stamps before 0 are not recorded
+        t_wrench, force, torque = t_wrench[late], force[late], torque[late]
     force = _quantise(force + rng.normal(0, noise.force_sigma_n, force.shape), noise.force_resolution_n)
     torque = _quantise(torque + rng.normal(0, noise.torque_sigma_nm, torque.shape), noise.torque_resolution_nm)
-    return idx * sim_dt, position, quat, motion.t_wrench_s, force, torque
+    return idx * sim_dt, position, quat, t_wrench, force, torque
 
 
 def _quantise(x: np.ndarray, step: float) -> np.ndarray:

@@ -11,7 +11,7 @@ import numpy as np
 from assets import Inertial, Pose
 
 from ..logs import PoseTrack, WrenchTrack
-from .held import HeldMotionConfig, SensorNoise, measure, simulate_held
+from .held import ConcealedEffect, HeldMotionConfig, SensorNoise, measure, simulate_held
 from .recording import write_recording
 from .render import RenderConfig, render_scan
 
@@ -32,6 +32,8 @@ class HeldSampleConfig:
     noise: SensorNoise = field(default_factory=SensorNoise)
     render: RenderConfig = field(default_factory=RenderConfig)
     seed: int = 0
+    effect: ConcealedEffect | None = None
+    """Physics hidden in both recordings; recorded in truth.json."""
 
 
 def make_held_sample(mesh, out_dir: Path, config: HeldSampleConfig = HeldSampleConfig()) -> Path:
@@ -64,14 +66,16 @@ def make_held_sample(mesh, out_dir: Path, config: HeldSampleConfig = HeldSampleC
     com_world = np.asarray(mesh_world.center_mass)
     inertia_world = np.asarray(mesh_world.moment_inertia)
     placement = Pose(tuple(com_world), (0.0, 0.0, 0.0, 1.0))
-    truth = Inertial(config.mass_kg, (0.0, 0.0, 0.0), inertia_world)
+    com_shift = config.effect.params["com_shift"] if config.effect and config.effect.name == "nonuniform_density" \
+        else (0.0, 0.0, 0.0)
+    truth = Inertial(config.mass_kg, tuple(com_shift), inertia_world)
     top = mesh_world.bounds[1, 2] - com_world[2]
     grasp = Pose((0.0, 0.0, config.grasp_height_fraction * top), (1.0, 0.0, 0.0, 0.0))
 
     recordings = {}
     for name in ("trial", "heldout"):
-        motion = simulate_held(truth, placement, grasp, config.motion, rng)
-        t_pose, position, quat, t_wrench, force, torque = measure(motion, config.noise, rng)
+        motion = simulate_held(truth, placement, grasp, config.motion, rng, effect=config.effect)
+        t_pose, position, quat, t_wrench, force, torque = measure(motion, config.noise, rng, effect=config.effect)
         path = out_dir / f"{name}.mcap"
         write_recording(
             path,
@@ -92,6 +96,7 @@ def make_held_sample(mesh, out_dir: Path, config: HeldSampleConfig = HeldSampleC
         "density_kg_m3": density,
         "grasp_in_object": {"position": list(grasp.position), "quaternion_xyzw": list(grasp.quaternion_xyzw)},
         "recordings": recordings,
+        "effect": {"name": config.effect.name, "params": config.effect.params} if config.effect else None,
         "config": _jsonable(asdict(config)),
     }
     (out_dir / "truth.json").write_text(json.dumps(doc, indent=2) + "\n")

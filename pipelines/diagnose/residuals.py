@@ -1,0 +1,142 @@
+"""Residual analysis of the wrench a model leaves unexplained, per channel and over time.
+
+The residual is measured minus predicted wrench in tracked-frame axes about
+the tracked origin, divided by each channel's noise level (so 1 is the sensor's
+noise). Per channel: RMS, whiteness (Ljung-Box over the thinned residual),
+the lag of the peak cross-correlation with the measured wrench (a peak away
+from zero lag points to a delay), and correlations with position, velocity,
+sign of velocity, speed squared and the gravity direction in the body frame.
+Over time: stretches where the residual stands out, in words and numbers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+from scipy.stats import chi2
+
+from pipelines.identify.least_squares import NewtonEulerRows
+
+CHANNELS = ("fx", "fy", "fz", "tx", "ty", "tz")
+
+
+@dataclass(frozen=True)
+class ResidualAnalysis:
+    """rms [6] in noise units; whiteness_p [6]: Ljung-Box p-values (small: not white);
+    xcorr_peak_lag_s [6] and xcorr_peak [6]: residual vs measured wrench of the same channel;
+    correlation: feature -> [6] Pearson coefficients (velocity-like features use the linear
+    velocity for force channels and the angular velocity for torque channels); localisation:
+    {"summary", "where": {"t_s": [a, b], "speed": [a, b]}, "share"} per stretch, largest first."""
+
+    rms: list[float]
+    whiteness_p: list[float]
+    xcorr_peak_lag_s: list[float]
+    xcorr_peak: list[float]
+    correlation: dict[str, list[float]]
+    localisation: list[dict]
+
+    def to_json(self) -> dict:
+        return {"channels": list(CHANNELS), "rms_noise_units": self.rms, "whiteness_p": self.whiteness_p,
+                "xcorr_peak_lag_s": self.xcorr_peak_lag_s, "xcorr_peak": self.xcorr_peak,
+                "correlation": self.correlation, "localisation": self.localisation}
+
+
+def _pearson(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = a - a.mean(), b - b.mean()
+    d = np.sqrt((a @ a) * (b @ b))
+    return float(a @ b / d) if d > 0 else 0.0
+
+
+def _ljung_box_p(x: np.ndarray, lags: int) -> float:
+    x = x - x.mean()
+    n = len(x)
+    denom = x @ x
+    if denom <= 0 or n <= lags + 1:
+        return 1.0
+    rho = np.array([x[:-k] @ x[k:] / denom for k in range(1, lags + 1)])
+    q = n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1)))
+    return float(chi2.sf(q, lags))
+
+
+def _peak_lag(residual: np.ndarray, signal: np.ndarray, max_lag: int) -> tuple[int, float]:
+    r, s = residual - residual.mean(), signal - signal.mean()
+    norm = np.sqrt((r @ r) * (s @ s))
+    if norm <= 0:
+        return 0, 0.0
+    best, peak = 0, 0.0
+    for lag in range(-max_lag, max_lag + 1):
+        c = (r[max(lag, 0):len(r) + min(lag, 0)] @ s[max(-lag, 0):len(s) - max(lag, 0)]) / norm
+        if abs(c) > abs(peak):
+            best, peak = lag, c
+    return best, float(peak)
+
+
+def analyse_residuals(rows: NewtonEulerRows, residual: np.ndarray, *, stride: int, max_lag_s: float = 0.05,
+                      block_s: float = 0.25, excess: float = 4.0) -> ResidualAnalysis:
+    """Analyse `residual` [N, 6] (noise units) of `rows`; `stride` thins to nearly independent samples.
+
+    A stretch is localised where the residual energy, averaged over `block_s`,
+    exceeds `excess` times its median.
+    """
+    thin = residual[::stride]
+    speed = np.linalg.norm(rows.velocity, axis=1)
+    motion = np.concatenate([rows.velocity, rows.omega], axis=1)
+    displacement = rows.position - rows.position[0]
+    features = {
+        "position": np.concatenate([displacement, displacement], axis=1),
+        "velocity": motion,
+        "sign_velocity": np.sign(motion),
+        "speed_squared": np.concatenate([np.abs(rows.velocity) * rows.velocity,
+                                         np.abs(rows.omega) * rows.omega], axis=1),
+        "gravity": np.concatenate([rows.gravity, rows.gravity], axis=1),
+    }
+    max_lag = int(round(max_lag_s * rows.rate_hz))
+    lags = [_peak_lag(residual[:, j], rows.b[:, j], max_lag) for j in range(6)]
+    energy = uniform_filter1d(np.sum(residual**2, axis=1), max(1, int(block_s * rows.rate_hz)))
+    return ResidualAnalysis(
+        rms=np.sqrt(np.mean(residual**2, axis=0)).tolist(),
+        whiteness_p=[_ljung_box_p(thin[:, j], 10) for j in range(6)],
+        xcorr_peak_lag_s=[lag / rows.rate_hz for lag, _ in lags],
+        xcorr_peak=[p for _, p in lags],
+        correlation={k: [_pearson(residual[:, j], f[:, j]) for j in range(6)] for k, f in features.items()},
+        localisation=_localise(rows.t_s, energy, np.sum(residual**2, axis=1), speed, excess),
+    )
+
+
+def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndarray, excess: float) -> list[dict]:
+    """Stretches where the smoothed residual energy exceeds `excess` x its median, largest share first."""
+    level = excess * np.median(energy)
+    hot = energy > level
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], hot.astype(int), [0]])))
+    total = raw.sum()
+    out = []
+    for a, b in zip(edges[::2], edges[1::2]):
+        share = float(raw[a:b].sum() / total) if total > 0 else 0.0
+        lo, hi = float(speed[a:b].min()), float(speed[a:b].max())
+        ratio = float(np.sqrt(energy[a:b].max() / max(np.median(energy), 1e-30)))
+        out.append({
+            "summary": f"wrench residual up to {ratio:.1f}x its typical size at t = {t[a]:.2f}-{t[b - 1]:.2f} s, "
+                       f"|v| = {lo:.2f}-{hi:.2f} m/s ({100 * share:.0f} % of the residual)",
+            "where": {"t_s": [float(t[a]), float(t[b - 1])], "speed": [lo, hi]},
+            "share": share,
+        })
+    return sorted(out, key=lambda d: -d["share"])
+
+
+def describe(analysis: ResidualAnalysis, threshold: float = 0.3) -> list[str]:
+    """The analysis in words: non-white channels, delay-like lags, strong state correlations."""
+    lines = []
+    for j, ch in enumerate(CHANNELS):
+        if analysis.whiteness_p[j] < 1e-3:
+            lines.append(f"{ch}: residual not white (Ljung-Box p = {analysis.whiteness_p[j]:.1e}), "
+                         f"RMS {analysis.rms[j]:.2f}x noise")
+        if analysis.xcorr_peak_lag_s[j] != 0 and abs(analysis.xcorr_peak[j]) > threshold:
+            lines.append(f"{ch}: residual peaks against the measured wrench at lag "
+                         f"{1000 * analysis.xcorr_peak_lag_s[j]:+.0f} ms (r = {analysis.xcorr_peak[j]:.2f})")
+        for k, values in analysis.correlation.items():
+            if abs(values[j]) > threshold:
+                lines.append(f"{ch}: residual correlates with {k.replace('_', ' ')} (r = {values[j]:+.2f})")
+    lines += [s["summary"] for s in analysis.localisation[:3]]
+    return lines

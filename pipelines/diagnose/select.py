@@ -1,0 +1,362 @@
+"""Choose the missing physics: refit the leading candidates and their pairs, compare on held-out data.
+
+Each candidate set (none, each leading candidate, each pair of them) is refitted
+with the inertial parameters by least squares on the training recordings, the
+time delay by a scalar search over re-stamped wrench, and scored by the
+Bayesian information criterion of the wrench it predicts on the held-out
+recording (or, without one, over time-blocked cross-validation folds). The
+winner's force and bias parameters are then refitted in Newton (Gauss-Newton
+through rollouts of the trials' shooting windows, effects added by
+`apply_effect_wrench`, the delay by re-stamping), and the winner is replayed
+on the evaluation recording in windows started from measured states, before
+and after, which is the position error reported; the Newton values are kept
+where that replay is better with them than with the least-squares ones.
+A COM away from the uniform-density prior's is `nonuniform_density` when it is
+significant and wins on held-out data too. What the chosen model still leaves
+in stretches of time is reported as unexplained.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from itertools import combinations
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from assets import Effect, FitMetrics, Inertial, Pose
+from pipelines.identify.free_body import IdentifyConfig
+from pipelines.identify.inertia import nearest_physical_inertia, theta_from_physical
+from pipelines.identify.least_squares import NewtonEulerRows, newton_euler_rows, object_frame_from_pi
+from pipelines.identify.rollout import FreeBodyRollout
+from pipelines.identify.windows import concat_windows, make_windows
+
+from .effects import CANDIDATES, NONUNIFORM_DENSITY, effect_vector
+from .residuals import ResidualAnalysis, analyse_residuals, describe
+from .screening import Library, Screening, bic, build_library, fit_subset, screen
+
+
+@dataclass(frozen=True)
+class DiagnoseConfig:
+    """How the diagnosis screens, refits and chooses."""
+
+    bootstraps: int = 40
+    """Block-bootstrap resamples of the screening."""
+    inclusion_threshold: float = 0.5
+    """Candidates screened in at least this often are refitted."""
+    leading: int = 3
+    """At most this many leading candidates (and their pairs) are refitted."""
+    folds: int = 3
+    """Time blocks of the cross-validation used when there is no held-out recording."""
+    com_sigma: float = 5.0
+    """A COM shift must be this many standard deviations (Mahalanobis) from the prior's ..."""
+    com_floor_m: float = 1e-3
+    """... and at least this far [m], to be reported as nonuniform_density."""
+    max_delay_s: float = 0.05
+    """Search range of time_delay [s], either sign."""
+    unexplained_share: float = 0.2
+    """A stretch holding at least this share of a non-white residual is reported as unexplained."""
+    window_s: float = 0.1
+    """Windows of the Newton replay [s]."""
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """What was found. effects: most certain first; unexplained: DESIGN.md entries; scores:
+    held-out criterion per candidate set (lower is better); fits: Newton windowed replay of the
+    evaluation recording before and after; residuals: wrench residual analysis before and after
+    on the evaluation recording; traces: arrays for the report."""
+
+    effects: tuple[Effect, ...]
+    unexplained: tuple[dict, ...]
+    screening: Screening
+    scores: dict[str, float]
+    fits: dict[str, FitMetrics]
+    residuals: dict[str, ResidualAnalysis]
+    findings: tuple[str, ...]
+    inertial: dict[str, Inertial]
+    heldout: bool
+    traces: dict
+
+    def provenance(self) -> dict:
+        return {
+            "screening": {"inclusion": self.screening.inclusion, "selected": list(self.screening.selected),
+                          "bootstraps": self.screening.bootstraps},
+            "scores": self.scores,
+            "evaluation": "holdout" if self.heldout else "time-blocked cross-validation",
+            "fits": {k: vars(v) for k, v in self.fits.items()},
+            "residuals": {k: v.to_json() for k, v in self.residuals.items()},
+            "findings": list(self.findings),
+        }
+
+
+@dataclass(frozen=True)
+class _Model:
+    """A fitted candidate set: inertial pi (tracked frame), coefficients per candidate, delay [s]."""
+
+    names: tuple[str, ...]
+    pi: np.ndarray
+    coefficients: dict
+    delay_s: float
+
+
+def _rows(recording, delay_s: float = 0.0) -> NewtonEulerRows:
+    w = recording.wrench
+    return newton_euler_rows(recording.pose.t_s, recording.pose.position, recording.pose.quat_xyzw,
+                             w.t_s - delay_s, w.force, w.torque)
+
+
+def _split(coef: np.ndarray, lib: Library, names) -> dict:
+    out, at = {}, 10
+    for n in names:
+        k = lib.groups[n][1] - lib.groups[n][0]
+        out[n] = coef[at:at + k]
+        at += k
+    return out
+
+
+def _fold_masks(lib: Library, folds: int) -> list[np.ndarray]:
+    edges = np.quantile(lib.sample, np.linspace(0, 1, folds + 1))
+    return [(lib.sample >= a) & ((lib.sample < b) | (k == folds - 1)) for k, (a, b) in enumerate(zip(edges[:-1],
+                                                                                                      edges[1:]))]
+
+
+def _fit(trials, names, com_tracked, config: DiagnoseConfig) -> tuple[_Model, Library]:
+    """Least-squares refit of `names` with the inertial parameters; a delay by re-stamping."""
+    additive = tuple(n for n in names if n != "time_delay")
+    delay = 0.0
+    if "time_delay" in names:
+        def rss(d):
+            lib = build_library([_rows(r, d) for r in trials], com_tracked, additive)
+            return fit_subset(lib, additive)[1]
+        delay = float(minimize_scalar(rss, bounds=(-config.max_delay_s, config.max_delay_s), method="bounded",
+                                      options={"xatol": 2e-4}).x)
+    lib = build_library([_rows(r, delay) for r in trials], com_tracked, additive)
+    coef, _, _ = fit_subset(lib, additive)
+    coefficients = _split(coef, lib, additive)
+    if "time_delay" in names:
+        coefficients["time_delay"] = np.array([delay])
+    return _Model(tuple(names), coef[:10], coefficients, delay), lib
+
+
+def _parameter_count(names) -> int:
+    return 10 + sum(CANDIDATES[n].size for n in names)
+
+
+def _design(lib: Library, names, com_tracked: np.ndarray | None) -> np.ndarray:
+    """Columns of the inertial parameters and `names`; with `com_tracked` the COM is held there
+    (m c = m com_tracked), leaving 7 inertial columns."""
+    cols = list(range(10)) + [c for n in names for c in range(*lib.groups[n])]
+    X = lib.X[:, cols]
+    if com_tracked is None:
+        return X
+    return np.column_stack([X[:, 0] + X[:, 1:4] @ com_tracked, X[:, 4:]])
+
+
+def _heldout_score(trials, holdout, names, com_tracked, config: DiagnoseConfig,
+                   com_held: np.ndarray | None = None) -> float:
+    """BIC of the held-out wrench prediction, or of time-blocked cross-validation without a held-out
+    recording; `com_held` holds the COM at that point (tracked frame) instead of fitting it."""
+    model, lib = _fit(trials, names, com_tracked, config)
+    additive = tuple(n for n in names if n != "time_delay")
+    k = _parameter_count(names) - (3 if com_held is not None else 0)
+    X = _design(lib, additive, com_held)
+    if holdout is not None:
+        coef, *_ = np.linalg.lstsq(X, lib.y, rcond=None)
+        held = build_library([_rows(holdout, model.delay_s)], com_tracked, additive)
+        r = held.y - _design(held, additive, com_held) @ coef
+        return bic(float(r @ r), len(r), k)
+    rss, n = 0.0, 0
+    for mask in _fold_masks(lib, config.folds):
+        coef, *_ = np.linalg.lstsq(X[~mask], lib.y[~mask], rcond=None)
+        r = lib.y[mask] - X[mask] @ coef
+        rss, n = rss + float(r @ r), n + int(mask.sum())
+    return bic(rss, n, k)
+
+
+def _com_covariance(lib: Library, names, pi: np.ndarray, X_tracked_body: Pose) -> np.ndarray:
+    """Covariance of the object-frame COM from the thinned rows' least-squares covariance."""
+    cols = list(range(10)) + [c for n in names for c in range(*lib.groups[n])]
+    X = lib.X[:, cols]
+    coef, rss, n = fit_subset(lib, names)
+    cov = np.linalg.pinv(X.T @ X) * rss / max(n - len(cols), 1)
+    _, J = object_frame_from_pi(pi, X_tracked_body)
+    return (J[:, :10] @ cov[:10, :10] @ J[:, :10].T)[1:4, 1:4]
+
+
+def _physical(inertial: Inertial) -> Inertial:
+    """The least-squares body made replayable (see `nearest_physical_inertia`)."""
+    mass = max(inertial.mass, 1e-9)
+    return Inertial(mass, inertial.com, nearest_physical_inertia(mass, inertial.inertia))
+
+
+def _residual(rows: NewtonEulerRows, model: _Model, com_tracked: np.ndarray) -> np.ndarray:
+    """Noise-scaled wrench residual [N, 6] of `model` on `rows` (already re-stamped for its delay)."""
+    pred = rows.A @ model.pi
+    for n in model.names:
+        if n != "time_delay":
+            pred = pred + CANDIDATES[n].columns(rows, com_tracked) @ model.coefficients[n]
+    return (rows.b - pred) * rows.scale
+
+
+def _replay(recording, X_tracked_body: Pose, inertial: Inertial, effect: np.ndarray, delay_s: float,
+            window_s: float) -> tuple[FitMetrics, dict]:
+    """Newton windowed replay of `recording` with the effects; position error and traces."""
+    p, w = recording.pose, recording.wrench
+    windows = make_windows(p.t_s, p.position, p.quat_xyzw, w.t_s - delay_s, w.force, w.torque, window_s=window_s,
+                           substeps=IdentifyConfig().substeps)
+    rollout = FreeBodyRollout(windows, X_tracked_body, sets=1, requires_grad=False)
+    theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())[None]
+    r = rollout.residuals(theta, momentum_scaled=False, effect=effect[None])[:, 0]
+    rp, rr = r[..., :3], r[..., 3:]
+    t = windows.t_start_s[None, :] + windows.dt_s * windows.substeps * np.arange(1, windows.sample_count + 1)[:, None]
+    measured = windows.measured_position[1:]
+    fit = FitMetrics(rmse_position_m=float(np.sqrt(np.mean(np.sum(rp**2, -1)))),
+                     rmse_rotation_rad=float(np.sqrt(np.mean(np.sum(rr**2, -1)))),
+                     loss=float(np.mean(np.sum(rp**2, -1) + np.sum(rr**2, -1))))
+    return fit, {"t_s": t.T.reshape(-1).tolist(), "measured_position": measured.transpose(1, 0, 2).reshape(-1, 3).tolist(),
+                 "position": (measured + rp).transpose(1, 0, 2).reshape(-1, 3).tolist(), "window_s": windows.window_s}
+
+
+def _newton_refit(trials, X_tracked_body: Pose, inertial: Inertial, effect: np.ndarray, slots: list[int],
+                  delay_s: float, config: DiagnoseConfig, iterations: int = 4) -> tuple[np.ndarray, list[float]]:
+    """Gauss-Newton on the effect parameters in `slots` through Newton rollouts of the trials' smoothed
+    shooting windows (inertial parameters held), central-difference Jacobians run as parallel sets.
+
+    Returns the refitted effect vector and the position loss [m^2] per iteration.
+    """
+    id_config = IdentifyConfig(window_s=config.window_s)
+    windows = concat_windows([
+        make_windows(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s - delay_s, r.wrench.force,
+                     r.wrench.torque, window_s=id_config.window_s, substeps=id_config.substeps,
+                     smoothing_hz=id_config.smoothing_hz) for r in trials])
+    K = len(slots)
+    rollout = FreeBodyRollout(windows, X_tracked_body, sets=1 + 2 * K, requires_grad=False)
+    theta = np.tile(theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix()), (1 + 2 * K, 1))
+    slot_scale = {s: sc for n in CANDIDATES if CANDIDATES[n].effect_slots
+                  for s, sc in zip(CANDIDATES[n].effect_slots, CANDIDATES[n].prior_scale)}
+    x = effect.copy()
+    step = None
+    losses = []
+    for _ in range(iterations):
+        h = np.array([max(0.05 * abs(x[s]), 0.01 * slot_scale[s]) for s in slots])
+        E = np.tile(x, (1 + 2 * K, 1))
+        for j, s in enumerate(slots):
+            E[1 + 2 * j, s] += h[j]
+            E[2 + 2 * j, s] -= h[j]
+        r = rollout.residuals(theta, momentum_scaled=False, effect=E)[..., :3]
+        r0 = r[:, 0].ravel()
+        loss = float(r0 @ r0 / len(r0))
+        if losses and loss > losses[-1] and step is not None:  # overshoot: back half way and stop
+            x[slots] -= 0.5 * step
+            break
+        losses.append(loss)
+        J = np.stack([(r[:, 1 + 2 * j].ravel() - r[:, 2 + 2 * j].ravel()) / (2 * h[j]) for j in range(K)], 1)
+        step = np.linalg.lstsq(J, -r0, rcond=None)[0]
+        x[slots] += step
+    return x, losses
+
+
+def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
+                  config: DiagnoseConfig = DiagnoseConfig()) -> Diagnosis:
+    """Diagnose a held body from `trials` (Recordings); `holdout` (a Recording or None) chooses and validates.
+
+    prior: the uniform-density estimate (object frame), whose COM is the reference of nonuniform_density.
+    """
+    rng = np.random.default_rng(config.seed)
+    rows = [_rows(r) for r in trials]
+    plain = build_library(rows, np.zeros(3), ())
+    pi0, _, _ = fit_subset(plain, ())
+    com_tracked = pi0[1:4] / pi0[0]
+    lib = build_library(rows, com_tracked)
+    screening = screen(lib, rng, config.bootstraps)
+    leading = screening.leading(config.inclusion_threshold, config.leading)
+    sets = [()] + [(n,) for n in leading] + list(combinations(leading, 2))
+    scores = {"+".join(s) or "none": _heldout_score(trials, holdout, s, com_tracked, config) for s in sets}
+    best = min(sets, key=lambda s: scores["+".join(s) or "none"])
+    model, fitted_lib = _fit(trials, best, com_tracked, config)
+    baseline, _ = _fit(trials, (), com_tracked, config)
+
+    # nonuniform density: the COM against the uniform-density prior's, on the chosen model
+    T_tracked_body = X_tracked_body.matrix()
+    com_prior_tracked = T_tracked_body[:3, :3] @ np.asarray(prior.com) + T_tracked_body[:3, 3]
+    found_inertial, _ = object_frame_from_pi(model.pi, X_tracked_body)
+    shift = np.asarray(found_inertial.com) - np.asarray(prior.com)
+    cov = _com_covariance(fitted_lib, tuple(n for n in best if n != "time_delay"), model.pi, X_tracked_body)
+    mahalanobis = float(np.sqrt(max(shift @ np.linalg.pinv(cov) @ shift, 0.0)))
+    chosen = "+".join(best) or "none"
+    scores[f"{chosen} (uniform-density COM)"] = _heldout_score(trials, holdout, best, com_tracked, config,
+                                                              com_held=com_prior_tracked)
+    density = (mahalanobis > config.com_sigma and np.linalg.norm(shift) > config.com_floor_m
+               and scores[chosen] < scores[f"{chosen} (uniform-density COM)"])
+
+    before_inertial = _physical(object_frame_from_pi(baseline.pi, X_tracked_body)[0])
+    if density:
+        before_inertial = replace(before_inertial, com=tuple(prior.com))
+    after_inertial = _physical(found_inertial)
+    evaluation = holdout if holdout is not None else trials[0]
+    effect = effect_vector({n: x for n, x in model.coefficients.items() if n != "time_delay"})
+    fit_before, trace_before = _replay(evaluation, X_tracked_body, before_inertial, np.zeros_like(effect), 0.0,
+                                       config.window_s)
+    fit_after, trace_after = _replay(evaluation, X_tracked_body, after_inertial, effect, model.delay_s,
+                                     config.window_s)
+    slots = [k for n in best if CANDIDATES[n].effect_slots for k in CANDIDATES[n].effect_slots]
+    newton = None
+    if slots:
+        # the Newton refit confirms and quantifies; its values are kept where they predict the evaluation better
+        refit, losses = _newton_refit(trials, X_tracked_body, after_inertial, effect, slots, model.delay_s, config)
+        fit_newton, trace_newton = _replay(evaluation, X_tracked_body, after_inertial, refit, model.delay_s,
+                                           config.window_s)
+        newton = {"trial_position_loss_m2": losses, "heldout_rmse_position_m": fit_newton.rmse_position_m,
+                  "heldout_rmse_position_least_squares_m": fit_after.rmse_position_m,
+                  "kept": fit_newton.rmse_position_m < fit_after.rmse_position_m}
+        if newton["kept"]:
+            effect, fit_after, trace_after = refit, fit_newton, trace_newton
+            model = replace(model, coefficients={
+                **model.coefficients,
+                **{n: effect[list(CANDIDATES[n].effect_slots)] for n in best if CANDIDATES[n].effect_slots}})
+
+    effects = []
+    # most certain first: inclusion probability, then the held-out criterion of the effect alone
+    for name in sorted(best, key=lambda n: (-screening.inclusion[n], scores[n])):
+        c = CANDIDATES[name]
+        effects.append(Effect(name, c.params(model.coefficients[name]), {
+            "inclusion_probability": screening.inclusion[name], "belongs": c.belongs,
+            "criterion_gain": scores["none"] - scores[chosen],
+            **({"newton_refit": newton} if newton and c.effect_slots else {}),
+        }))
+    if density:
+        effects.append(Effect(NONUNIFORM_DENSITY, {"com_shift": shift.tolist()}, {
+            "mahalanobis": mahalanobis, "belongs": "object",
+            "criterion_gain": scores[f"{chosen} (uniform-density COM)"] - scores[chosen],
+        }))
+    for e in effects:
+        e.evidence.update({"heldout_rmse_position_before_m": fit_before.rmse_position_m,
+                           "heldout_rmse_position_after_m": fit_after.rmse_position_m})
+
+    eval_rows_before = _rows(evaluation)
+    eval_rows_after = _rows(evaluation, model.delay_s)
+    stride = lib.stride
+    residuals = {
+        "before": analyse_residuals(eval_rows_before, _residual(eval_rows_before, baseline, com_tracked),
+                                    stride=stride),
+        "after": analyse_residuals(eval_rows_after, _residual(eval_rows_after, model, com_tracked), stride=stride),
+    }
+    after = residuals["after"]
+    unexplained = tuple(
+        {"summary": s["summary"], "where": s["where"], "share": s["share"]}
+        for s in after.localisation
+        if s["share"] >= config.unexplained_share and min(after.whiteness_p) < 1e-6
+    )
+    traces = {"t_s": trace_before["t_s"], "measured_position": trace_before["measured_position"],
+              "before_position": trace_before["position"], "after_position": trace_after["position"],
+              "window_s": trace_before["window_s"], "residual_t_s": eval_rows_after.t_s.tolist(),
+              "residual_before": _residual(eval_rows_before, baseline, com_tracked).tolist(),
+              "residual_after": _residual(eval_rows_after, model, com_tracked).tolist()}
+    return Diagnosis(
+        effects=tuple(effects), unexplained=unexplained, screening=screening, scores=scores,
+        fits={"before": fit_before, "after": fit_after}, residuals=residuals,
+        findings=tuple(describe(residuals["before"])), inertial={"before": before_inertial, "after": after_inertial},
+        heldout=holdout is not None, traces=traces,
+    )

@@ -1,0 +1,258 @@
+"""`twin bench diagnose`: recordings with a concealed effect (or none), shuffled; is the right one found?
+
+Each case is a held cube or sphere moved by the simulated robot (Newton), with
+one effect of a random magnitude hidden in the trial and held-out recordings
+alike, or none. The magnitude is drawn log-uniformly as a multiple of the
+sensor's noise (per-sample force or torque for bias, damping and drag; about
+a millisecond per unit for delay; a millimetre per unit for the COM shift), from
+barely above it to large. The diagnosis is told nothing of it.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+EFFECTS = ("sensor_bias", "time_delay", "viscous_damping", "quadratic_drag", "nonuniform_density")
+RATIO_RANGE = (0.5, 8.0)
+"""Effect size as a multiple of the per-sample sensor noise (see `concealed_effect`)."""
+SPEED_M_S = 0.15
+"""Typical speed of the COM in these motions [m/s], to turn a force ratio into damping and drag."""
+TURN_RAD_S = 2.0
+"""Typical angular speed [rad/s]."""
+
+
+@dataclass(frozen=True)
+class Case:
+    """One recording pair: object, concealed effect (None: clean), its size ratio and seed."""
+
+    shape: str
+    effect: object
+    ratio: float
+    seed: int
+
+
+def concealed_effect(name: str, ratio: float, rng: np.random.Generator, noise):
+    """A ConcealedEffect of `name` whose size is `ratio` times the sensor's noise (see module docstring)."""
+    from pipelines.synth.held import ConcealedEffect
+
+    direction = rng.normal(size=3)
+    direction /= np.linalg.norm(direction)
+    other = rng.normal(size=3)
+    other /= np.linalg.norm(other)
+    if name == "sensor_bias":
+        return ConcealedEffect(name, {"force": (ratio * noise.force_sigma_n * direction).tolist(),
+                                      "torque": (ratio * noise.torque_sigma_nm * other).tolist()})
+    if name == "time_delay":
+        return ConcealedEffect(name, {"seconds": float(rng.choice([-1, 1]) * ratio * 2e-3)})
+    if name == "viscous_damping":
+        return ConcealedEffect(name, {"b": ratio * noise.force_sigma_n / SPEED_M_S,
+                                      "b_angular": ratio * noise.torque_sigma_nm / TURN_RAD_S})
+    if name == "quadratic_drag":
+        return ConcealedEffect(name, {"c": ratio * noise.force_sigma_n / SPEED_M_S**2})
+    return ConcealedEffect(name, {"com_shift": (ratio * 1e-3 * direction).tolist()})
+
+
+def make_cases(concealed: int, clean: int, seed: int) -> list[Case]:
+    """`concealed` cases cycling through every effect, `clean` without, shuffled."""
+    from pipelines.synth.held import SensorNoise
+
+    rng = np.random.default_rng(seed)
+    cases = []
+    for k in range(concealed):
+        name = EFFECTS[k % len(EFFECTS)]
+        lo, hi = (1.5, 10.0) if name == "nonuniform_density" else RATIO_RANGE
+        ratio = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+        cases.append(Case(("cube", "sphere")[k % 2], concealed_effect(name, ratio, rng, SensorNoise()), ratio,
+                          int(rng.integers(1 << 30))))
+    cases += [Case(("cube", "sphere")[k % 2], None, 0.0, int(rng.integers(1 << 30))) for k in range(clean)]
+    rng.shuffle(cases)
+    return cases
+
+
+def record_case(case: Case, directory: Path, duration_s: float):
+    """Simulate the case's trial and held-out recordings into `directory`; returns (trial, holdout, prior,
+    X_tracked_body) as `diagnose_held` takes them."""
+    import trimesh
+
+    from assets import Inertial, Pose
+    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
+    from pipelines.synth.recording import write_recording
+
+    rng = np.random.default_rng(case.seed)
+    mass, mesh = ((0.02, trimesh.creation.box((0.04,) * 3)) if case.shape == "cube"
+                  else (0.05, trimesh.creation.icosphere(subdivisions=3, radius=0.025)))
+    mesh.density = mass / mesh.volume
+    uniform = Inertial(mass, (0.0, 0.0, 0.0), np.asarray(mesh.moment_inertia))
+    effect = case.effect
+    truth = uniform
+    if effect is not None and effect.name == "nonuniform_density":
+        truth = replace(uniform, com=tuple(effect.params["com_shift"]))
+    placement = Pose((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))
+    top = float(mesh.bounds[1, 2])
+    grasp = Pose((0.0, 0.0, top), (1.0, 0.0, 0.0, 0.0))
+    motion_config = HeldMotionConfig(duration_s=duration_s, substeps=4)
+    out = []
+    for name in ("trial", "heldout"):
+        motion = simulate_held(truth, placement, grasp, motion_config, rng, effect=effect)
+        t_pose, position, quat, t_wrench, force, torque = measure(motion, SensorNoise(), rng, effect=effect)
+        path = directory / f"{name}.mcap"
+        write_recording(path, pose=PoseTrack(t_pose, position, quat, "world", "gripper", "/tracker/pose"),
+                        wrench=WrenchTrack(t_wrench, force, torque, "/ft_sensor/wrench", "gripper"))
+        out.append(read_recording(path))
+    return out[0], out[1], uniform, grasp.inverse()
+
+
+def truth_magnitude(effect) -> float:
+    from pipelines.diagnose import main_magnitude
+
+    params = effect.params
+    if effect.name == "time_delay":
+        return abs(params["seconds"])
+    return main_magnitude(effect.name, params)
+
+
+def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0, seed: int = 0,
+                   bootstraps: int = 40) -> list[dict]:
+    """Run every case, print the table and the summary; returns the rows."""
+    from pipelines.diagnose import DiagnoseConfig, diagnose_held, main_magnitude
+
+    rows = []
+    header = (f"{'#':>3} {'concealed':<18} {'ratio':>6} {'found (top-1)':<18} {'main err %':>10} "
+              f"{'rmse before mm':>14} {'after mm':>9} {'s':>5}")
+    print(header)
+    print("-" * len(header))
+    for k, case in enumerate(make_cases(concealed, clean, seed)):
+        t0 = time.perf_counter()
+        with tempfile.TemporaryDirectory() as tmp:
+            trial, holdout, prior, X_tracked_body = record_case(case, Path(tmp), duration_s)
+        diagnosis = diagnose_held([trial], holdout, X_tracked_body, prior,
+                                  DiagnoseConfig(bootstraps=bootstraps, seed=case.seed))
+        top = diagnosis.effects[0] if diagnosis.effects else None
+        truth = case.effect.name if case.effect else None
+        error = None
+        if top is not None and case.effect is not None and top.name == truth:
+            # a delay of the wrong sign counts as an error of more than 100 %
+            found = (top.params["seconds"] * np.sign(case.effect.params["seconds"]) if truth == "time_delay"
+                     else main_magnitude(top.name, top.params))
+            error = 100 * abs(found - truth_magnitude(case.effect)) / truth_magnitude(case.effect)
+        row = {"concealed": truth, "ratio": case.ratio, "found": top.name if top else None,
+               "all_found": [e.name for e in diagnosis.effects], "main_error_pct": error,
+               "rmse_before_m": diagnosis.fits["before"].rmse_position_m,
+               "rmse_after_m": diagnosis.fits["after"].rmse_position_m, "seconds": time.perf_counter() - t0}
+        rows.append(row)
+        print(f"{k:>3} {truth or 'none':<18} {case.ratio:>6.2f} {row['found'] or 'none':<18} "
+              f"{'' if error is None else f'{error:.1f}':>10} {1000 * row['rmse_before_m']:>14.3f} "
+              f"{1000 * row['rmse_after_m']:>9.3f} {row['seconds']:>5.1f}", flush=True)
+    _summary(rows)
+    return rows
+
+
+def _summary(rows: list[dict]) -> None:
+    concealed = [r for r in rows if r["concealed"]]
+    clean = [r for r in rows if not r["concealed"]]
+    right = [r for r in concealed if r["found"] == r["concealed"]]
+    within = [r for r in right if r["main_error_pct"] is not None and r["main_error_pct"] <= 15]
+    reported = [r for r in rows if r["found"]]
+    halved = [r for r in reported if r["rmse_after_m"] <= 0.5 * r["rmse_before_m"]]
+    print()
+    print(f"top-1 right: {len(right)}/{len(concealed)} concealed ({100 * len(right) / max(len(concealed), 1):.0f} %)")
+    for name in EFFECTS:
+        of = [r for r in concealed if r["concealed"] == name]
+        ok = [r for r in of if r["found"] == name]
+        errs = [r["main_error_pct"] for r in ok]
+        print(f"  {name:<18} {len(ok)}/{len(of)} right, main parameter error median "
+              f"{np.median(errs) if errs else float('nan'):.1f} %, max {max(errs) if errs else float('nan'):.1f} %")
+    print(f"nothing reported on clean: {len(clean) - sum(bool(r['found']) for r in clean)}/{len(clean)}")
+    print(f"main parameter within 15 %: {len(within)}/{len(right)} of the right ones")
+    print(f"held-out position RMSE at least halved: {len(halved)}/{len(reported)} where an effect is reported")
+
+
+WORKSHOP = Path(__file__).resolve().parents[3] / "shared" / "data" / "workshop-tools"
+WORKSHOP_TOOLS = ("Hammer", "Rubber Mallet", "Screwdriver", "Electronic Caliper", "Allen Key", "Adjustable Wrench")
+MIRROR = np.diag([1.0, 1.0, -1.0])
+"""The workshop-tools simulations obey F = m (a + g) with g pointing down, which is Newton's law with
+gravity pointing up. Mirroring world and body through z (pseudo-vectors: torque, angular velocity
+change sign too) turns them into recordings of our world, where gravity points down."""
+
+
+def workshop_recording(tool: str, directory: Path, rng: np.random.Generator, root: Path = WORKSHOP):
+    """One tool's simulated recording, mirrored (see MIRROR) and written as MCAP with the 'Low' noise of
+    the dataset's experiments; returns (recording, uniform-density prior, X_tracked_body, true COM shift
+    in the mirrored object frame [m])."""
+    import trimesh
+    import yaml
+    from scipy.spatial.transform import Rotation
+
+    from assets import Inertial, Pose
+    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from pipelines.synth.recording import write_recording
+
+    folder = root / "data" / "Workshop Tools Dataset" / tool
+    npz = root / "derived" / "simulations_npz" / f"{tool.replace(' ', '_')}.npz"
+    if not npz.is_file() or not folder.is_dir():
+        raise FileNotFoundError(f"{npz}: workshop-tools data not found")
+    truth = yaml.safe_load((folder / "Inertia.yaml").read_text())["OBJECT"]
+    d = np.load(npz)
+    mesh = trimesh.load(folder / "mesh.ply", force="mesh")
+    mesh.apply_scale(1e-3)
+    mesh.apply_transform(np.block([[MIRROR, np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    mesh.density = truth["MASS"] / mesh.volume
+    uniform_com = np.asarray(mesh.center_mass)
+    true_com = MIRROR @ np.asarray(truth["COM_WRT_MESH"])
+    prior = Inertial(truth["MASS"], tuple(uniform_com),
+                     np.asarray(mesh.moment_inertia))  # about the uniform COM, mesh axes
+    grasp = np.asarray(truth["GRASP_WRT_MESH"])
+    X_tracked_body = np.linalg.inv(grasp)
+    X_tracked_body[:3, :3] = MIRROR @ X_tracked_body[:3, :3] @ MIRROR
+    X_tracked_body[:3, 3] = MIRROR @ X_tracked_body[:3, 3]
+
+    t = d["timestamp"]
+    T = d["ft_pose"]
+    R = MIRROR @ T[:, :3, :3] @ MIRROR
+    position = (T[:, :3, 3] @ MIRROR) + rng.normal(0, 2e-5, (len(t), 3))
+    quat = (Rotation.from_matrix(R) * Rotation.from_rotvec(rng.normal(0, 2e-4, (len(t), 3)))).as_quat()
+    force = d["ft_value"][:, :3] @ MIRROR + rng.normal(0, 0.05, (len(t), 3))
+    torque = -(d["ft_value"][:, 3:] @ MIRROR) + rng.normal(0, 0.0025, (len(t), 3))
+    path = directory / f"{tool.replace(' ', '_')}.mcap"
+    write_recording(path, pose=PoseTrack(t, position, quat, "world", "ft_sensor", "/tracker/pose"),
+                    wrench=WrenchTrack(t, force, torque, "/ft_sensor/wrench", "world"))
+    pose = Pose(tuple(X_tracked_body[:3, 3]), tuple(Rotation.from_matrix(X_tracked_body[:3, :3]).as_quat()))
+    return read_recording(path), prior, pose, true_com - uniform_com
+
+
+def bench_diagnose_workshop(seed: int = 0) -> list[dict]:
+    """Diagnose each workshop tool (time-blocked cross-validation); print what it finds against the truth."""
+    from pipelines.diagnose import DiagnoseConfig, diagnose_held
+
+    rng = np.random.default_rng(seed)
+    header = (f"{'tool':<19} {'found':<34} {'true COM shift mm':<22} {'found COM shift mm':<22} "
+              f"{'rmse before mm':>14} {'after mm':>9}")
+    print(header)
+    print("-" * len(header))
+    rows = []
+    for tool in WORKSHOP_TOOLS:
+        with tempfile.TemporaryDirectory() as tmp:
+            recording, prior, X_tracked_body, shift = workshop_recording(tool, Path(tmp), rng)
+        diagnosis = diagnose_held([recording], None, X_tracked_body, prior, DiagnoseConfig(seed=seed))
+        found = {e.name: e.params for e in diagnosis.effects}
+        found_shift = found.get("nonuniform_density", {}).get("com_shift")
+        # back to the dataset's (unmirrored) mesh frame for the table
+        fmt = lambda v: "-" if v is None else "(" + ", ".join(f"{1000 * x:.1f}" for x in MIRROR @ v) + ")"  # noqa: E731
+        row = {"tool": tool, "found": list(found), "true_shift_m": (MIRROR @ shift).tolist(),
+               "found_shift_m": None if found_shift is None else (MIRROR @ np.asarray(found_shift)).tolist(),
+               "rmse_before_m": diagnosis.fits["before"].rmse_position_m,
+               "rmse_after_m": diagnosis.fits["after"].rmse_position_m,
+               "unexplained": [u["summary"] for u in diagnosis.unexplained]}
+        rows.append(row)
+        print(f"{tool:<19} {', '.join(found) or 'none':<34} {fmt(shift):<22} "
+              f"{fmt(None if found_shift is None else np.asarray(found_shift)):<22} "
+              f"{1000 * row['rmse_before_m']:>14.3f} {1000 * row['rmse_after_m']:>9.3f}", flush=True)
+        for u in row["unexplained"]:
+            print(f"    unexplained: {u}")
+    return rows
