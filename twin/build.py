@@ -181,22 +181,15 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         }
 
     out = Path(config.output)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    tmp = _staging_dir(out)
     try:
-        (tmp / "meshes").mkdir()
-        mesh_object.export(tmp / "meshes" / "visual.obj")
-        collision = []
-        for k, part in enumerate(parts.parts):
-            rel = f"meshes/collision_{k:03d}.obj"
-            part.export(tmp / rel)
-            collision.append(rel)
+        collision = _write_meshes(tmp, mesh_object, parts)
         asset = Asset(
             name=name,
             kind=detection.kind,
             placement=placement,
             theta=theta,
-            geometry=Geometry("meshes/visual.obj", tuple(collision)),
+            geometry=Geometry("meshes/visual.obj", collision),
             material=Material(material.name, float(theta.mass.value / mesh_object.volume), theta.friction.value),
             fit=fit,
             effects=diagnosis.effects if diagnosis else (),
@@ -364,6 +357,24 @@ def _progress_logger(log):
         if iteration <= 10 or iteration % 25 == 0:
             log(f"  iteration {iteration}: loss {loss:.6g}")
     return progress
+
+
+def _staging_dir(out: Path) -> Path:
+    """An empty directory beside `out` to write into; `_replace_dir` swaps it in when complete."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+
+
+def _write_meshes(tmp: Path, mesh_object, parts) -> tuple[str, ...]:
+    """meshes/visual.obj and meshes/collision_NNN.obj under `tmp`; returns the collision paths (relative)."""
+    (tmp / "meshes").mkdir()
+    mesh_object.export(tmp / "meshes" / "visual.obj")
+    collision = []
+    for k, part in enumerate(parts.parts):
+        rel = f"meshes/collision_{k:03d}.obj"
+        part.export(tmp / rel)
+        collision.append(rel)
+    return tuple(collision)
 
 
 def _replace_dir(new: Path, out: Path) -> None:

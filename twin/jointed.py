@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import tempfile
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -72,7 +71,7 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     from pipelines.identify.kind import joint_coordinates
     from pipelines.validate import replay_jointed_mujoco, validate_jointed_exports
 
-    from .build import _replace_dir
+    from .build import _replace_dir, _staging_dir, _write_meshes
 
     fit = detection.joint
     jconfig = JointedConfig()
@@ -88,16 +87,9 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     metrics = lambda d: FitMetrics(d["rmse_position_m"], d["rmse_q"] if fit.type == "revolute" else 0.0,  # noqa: E731
                                    d["rmse_q"])
     out = Path(config.output)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    tmp = _staging_dir(out)
     try:
-        (tmp / "meshes").mkdir()
-        mesh_object.export(tmp / "meshes" / "visual.obj")
-        collision = []
-        for k, part in enumerate(parts.parts):
-            rel = f"meshes/collision_{k:03d}.obj"
-            part.export(tmp / rel)
-            collision.append(rel)
+        collision = _write_meshes(tmp, mesh_object, parts)
         base = None
         if config.base_mesh:
             try:
@@ -107,7 +99,7 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
             base = "meshes/base.obj"
         asset = Asset(
             name=name, kind=fit.type, placement=placement, theta=theta,
-            geometry=Geometry("meshes/visual.obj", tuple(collision), base),
+            geometry=Geometry("meshes/visual.obj", collision, base),
             material=Material(prior.material.name, float(theta.mass.value / mesh_object.volume), prior.friction[0]),
             joint=joint,
             fit=Fit(metrics(held["prior"]), metrics(held[identified.selected]), jconfig.window_s) if held else None,
