@@ -11,6 +11,7 @@ import json
 import shutil
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Literal
@@ -181,8 +182,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         }
 
     out = Path(config.output)
-    tmp = _staging_dir(out)
-    try:
+    with staged_output(out) as tmp:
         collision = _write_meshes(tmp, mesh_object, parts)
         asset = Asset(
             name=name,
@@ -214,10 +214,6 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
 
         write_report(tmp / "report.html", asset_to_json(asset), loss_history, traces,
                      diagnosis.traces if diagnosis else None)
-        _replace_dir(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     log(f"wrote {out}/ in {time.perf_counter() - t_start:.1f} s")
     return out
 
@@ -359,10 +355,18 @@ def _progress_logger(log):
     return progress
 
 
-def _staging_dir(out: Path) -> Path:
-    """An empty directory beside `out` to write into; `_replace_dir` swaps it in when complete."""
+@contextmanager
+def staged_output(out: Path):
+    """A directory beside `out` to write into: it replaces `out` when the block completes and is removed
+    if the block fails, so a failed build leaves the previous `out` untouched."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    _replace_dir(tmp, out)
 
 
 def _write_meshes(tmp: Path, mesh_object, parts) -> tuple[str, ...]:

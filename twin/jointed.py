@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -71,7 +70,7 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     from pipelines.identify.kind import joint_coordinates
     from pipelines.validate import replay_jointed_mujoco, validate_jointed_exports
 
-    from .build import _replace_dir, _staging_dir, _write_meshes
+    from .build import _write_meshes, staged_output
 
     fit = detection.joint
     jconfig = JointedConfig()
@@ -87,8 +86,7 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     metrics = lambda d: FitMetrics(d["rmse_position_m"], d["rmse_q"] if fit.type == "revolute" else 0.0,  # noqa: E731
                                    d["rmse_q"])
     out = Path(config.output)
-    tmp = _staging_dir(out)
-    try:
+    with staged_output(out) as tmp:
         collision = _write_meshes(tmp, mesh_object, parts)
         base = None
         if config.base_mesh:
@@ -136,9 +134,5 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
                 "baseline_position": fit.tracked_position(tr["prior"]).reshape(-1, 3),
                 "final_position": fit.tracked_position(tr["kept"]).reshape(-1, 3),
             })
-        _replace_dir(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     log(f"wrote {out}/ ({fit.type} joint) in {time.perf_counter() - t_start:.1f} s")
     return out
