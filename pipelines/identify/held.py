@@ -60,21 +60,28 @@ class HeldIdentification:
 
 
 def tracked_to_object(recording, placement: Pose) -> Pose:
-    """The object frame in the tracked frame, from the scan placement and the first still poses.
+    """The object frame in the tracked frame, from the scan placement and the still poses it starts with.
 
-    The object sits at its placement when the recording starts; poses in the
-    first 0.1 s are averaged when they are still (spread under 1 mm), which
-    beats the tracker's noise.
+    The object sits at its placement when the recording starts. The still
+    stretch ends where the 0.1 s running mean of the tracked position leaves
+    the first 0.1 s's mean by more than four standard errors of the tracker's
+    noise (measured on the recording); averaging the whole stretch beats the
+    noise of any one sample (0.2 mm on a tracker of the sample recordings).
     """
     from scipy.spatial.transform import Rotation
 
-    pose = recording.pose
-    first = pose.t_s <= pose.t_s[0] + 0.1
-    if np.ptp(pose.position[first], axis=0).max() > 1e-3:
-        first = np.zeros(len(pose.t_s), bool)
-        first[0] = True
-    rotation = Rotation.from_quat(pose.quat_xyzw[first]).mean()
-    T_world_tracked = Pose(tuple(pose.position[first].mean(axis=0)), tuple(rotation.as_quat()))
+    from .noise import estimate_noise_levels
+
+    pose, wrench = recording.pose, recording.wrench
+    noise = estimate_noise_levels(pose.t_s, pose.position, pose.quat_xyzw, wrench.t_s, wrench.force, wrench.torque)
+    n = max(1, int(np.sum(pose.t_s <= pose.t_s[0] + 0.1)))
+    running = np.cumsum(np.vstack([np.zeros(3), pose.position]), axis=0)
+    running = (running[n:] - running[:-n]) / n  # mean of samples i .. i+n-1
+    drift = np.abs(running - running[0]).max(axis=1)
+    moved = np.flatnonzero(drift > 4 * np.sqrt(2.0 / n) * noise.position_m)
+    still = int(moved[0]) if len(moved) else len(pose.t_s)
+    rotation = Rotation.from_quat(pose.quat_xyzw[:still]).mean()
+    T_world_tracked = Pose(tuple(pose.position[:still].mean(axis=0)), tuple(rotation.as_quat()))
     return T_world_tracked.inverse() @ placement
 
 

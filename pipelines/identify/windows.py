@@ -75,6 +75,30 @@ def smoothed_pose_grid(t_s, position, quat_xyzw, cutoff_hz: float) -> tuple[np.n
     return t, lowpass(pos, cutoff_hz, rate), Rotation.from_quat(lowpass(q, cutoff_hz, rate))
 
 
+def central_derivative(x: np.ndarray, dt_s: float) -> np.ndarray:
+    """d/dt along axis 0 by the five-point central stencil (np.gradient's 2nd order at the two ends).
+
+    The three-point stencil reads a 5 Hz sine 0.4 % low at 200 Hz, and twice that
+    for a second derivative: a bias in the inertia as large as the noise allows.
+    """
+    d = np.gradient(x, dt_s, axis=0)
+    d[2:-2] = (8 * (x[3:-1] - x[1:-3]) - (x[4:] - x[:-4])) / (12 * dt_s)
+    return d
+
+
+def angular_velocity(rot: Rotation, dt_s: float) -> np.ndarray:
+    """World-axes angular velocity [rad/s] of a uniformly sampled rotation, by the five-point stencil
+    on rotation vectors between samples symmetric about each one (three-point at the ends)."""
+    def span(j: int) -> np.ndarray:
+        return (rot[2 * j:] * rot[: len(rot) - 2 * j].inv()).as_rotvec()
+
+    omega = np.empty((len(rot), 3))
+    omega[1:-1] = span(1) / (2 * dt_s)
+    omega[0], omega[-1] = omega[1], omega[-2]
+    omega[2:-2] = (8 * span(1)[1:-1] - span(2)) / (12 * dt_s)
+    return omega
+
+
 def local_twist(grid_t, pos, rot: Rotation, index: int, half_width: int) -> np.ndarray:
     """Velocity [m/s] and angular velocity [rad/s, world] at `index` from a local quadratic fit."""
     lo, hi = max(0, index - half_width), min(len(grid_t), index + half_width + 1)
