@@ -105,7 +105,7 @@ def newton_euler_rows(
     """Regressor and measured wrench of a recording; wrench in world axes about the tracked origin.
 
     Both sides are low-passed at `cutoff_hz` in tracked-frame axes (parallel
-    filtering, Gautier 1997): the equation holds at every instant and the filter
+    filtering, as in robot identification practice): the equation holds at every instant and the filter
     is linear, so the filtered rows obey it exactly, where a regressor built from
     filtered poses would miss the filter's effect on its products (omega x omega,
     the turning gravity: up to 10 Hz for wrist turns of 5 Hz). The kinematics
