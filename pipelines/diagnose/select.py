@@ -78,13 +78,9 @@ class Diagnosis:
     inertial: dict[str, Inertial]
     heldout: bool
     traces: dict
-    newton_refit: dict | None = None
-    """The chosen effects' Newton refit against the base model on the evaluation recording, where one ran
-    apart from the candidate scores (jointed parts)."""
 
     def provenance(self) -> dict:
         return {
-            **({"newton_refit": self.newton_refit} if self.newton_refit else {}),
             "screening": {"inclusion": self.screening.inclusion, "selected": list(self.screening.selected),
                           "bootstraps": self.screening.bootstraps},
             "scores": self.scores,
