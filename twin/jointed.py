@@ -77,15 +77,20 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     jconfig = JointedConfig()
     identified = timer.run("identify (Featherstone)", identify_jointed, trials, fit, placement, prior.inertial,
                            holdout, jconfig)
-    diagnosis, kept = None, identified
+    diagnosis, kept, diagnosis_skipped = None, identified, None
     if config.diagnose:
         from pipelines.diagnose import DiagnoseConfig, diagnose_jointed
 
-        diagnosis, refit = timer.run("diagnose", diagnose_jointed, trials, holdout, fit, placement, prior.inertial,
-                                     jconfig, DiagnoseConfig())
-        _log_diagnosis(diagnosis, log)
-        # the identification lacked the effect, so its estimate is biased: the refit with it is kept
-        kept = refit or identified
+        try:
+            diagnosis, refit = timer.run("diagnose", diagnose_jointed, trials, holdout, fit, placement,
+                                         prior.inertial, jconfig, DiagnoseConfig())
+        except ValueError as exc:  # e.g. trial halves too short for one window each: the identified build stands
+            log(f"diagnose skipped: {exc}")
+            diagnosis_skipped = str(exc)
+        else:
+            _log_diagnosis(diagnosis, log)
+            # the identification lacked the effect, so its estimate is biased: the refit with it is kept
+            kept = refit or identified
     found = {e.name: e.params for e in diagnosis.effects} if diagnosis else {}
     # every recording shows travel the part can make, the held-out one too
     q_all = np.concatenate([joint_coordinates(fit, t.pose) for t in (*trials, *filter(None, [holdout]))])
@@ -135,7 +140,8 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
             "kind": detection.to_json(),
             "identify": {"method": "featherstone", "config": asdict(jconfig), **identified.provenance()},
             **({"diagnose": diagnosis.provenance() | {"refit": kept.provenance()}} if kept is not identified else
-               {"diagnose": diagnosis.provenance()} if diagnosis else {}),
+               {"diagnose": diagnosis.provenance()} if diagnosis else
+               {"diagnose": {"skipped": diagnosis_skipped}} if diagnosis_skipped else {}),
             "validation": validation,
             "heldout_replay": replay,
             "timings_s": timer.seconds | {"total": time.perf_counter() - t_start},
