@@ -130,7 +130,9 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
         if holdout is not None:
             replay = {"mujoco": timer.run("replay (MuJoCo)", replay_jointed_mujoco, paths.mjcf, asset, holdout, fit,
                                           jconfig),
-                      "newton": held[identified.selected]}
+                      "newton": held[identified.selected] if kept is identified else
+                      {"rmse_q": diagnosis.fits["after"].loss,
+                       "rmse_position_m": diagnosis.fits["after"].rmse_position_m}}
             log(f"held-out replay: MuJoCo {replay['mujoco']}, Newton {replay['newton']}")
         provenance = {
             "config": json.loads(json.dumps(asdict(config), default=str)),
