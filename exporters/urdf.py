@@ -45,8 +45,10 @@ def export_urdf(asset: Asset, out_dir: Path) -> Path:
     and the full tensor about the COM [kg m^2], object-frame axes; the visual
     mesh; one `<collision>` per convex part. Surface friction (unitless) has
     no standard tag and goes to both PyBullet's `<contact><lateral_friction>`
-    and Gazebo's `<gazebo><mu1/><mu2/>`. Mesh paths are relative to the
-    URDF file (MuJoCo cannot open `package://`).
+    and Gazebo's `<gazebo><mu1/><mu2/>`. A jointed part's joint gets `<dynamics
+    damping friction>` and, with a spring, Gazebo's `springStiffness` and
+    `springReference`. Mesh paths are relative to the URDF file (MuJoCo cannot
+    open `package://`).
 
     Raises:
         ValueError: an unphysical inertia tensor, no collision parts or an empty joint range.
@@ -131,4 +133,9 @@ def _write_base_and_joint(robot: ET.Element, asset: Asset) -> np.ndarray:
     ET.SubElement(joint, "limit", lower=repr(float(j.lower)), upper=repr(float(j.upper)), effort="1000.0",
                   velocity="100.0")
     ET.SubElement(joint, "dynamics", damping=repr(float(j.damping)), friction=repr(float(asset.theta.friction.value)))
+    if j.stiffness:
+        # a joint spring has no URDF tag; Gazebo's URDF reader takes it from the joint's <gazebo> extension
+        gazebo = ET.SubElement(robot, "gazebo", reference=f"{asset.name}_joint")
+        ET.SubElement(gazebo, "springStiffness").text = repr(float(j.stiffness))
+        ET.SubElement(gazebo, "springReference").text = repr(float(j.spring_ref))
     return offset

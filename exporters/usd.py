@@ -170,8 +170,9 @@ def _define_joint(stage, body_path, asset: Asset) -> None:
 
     UsdPhysics joints turn about a named local axis: X, rotated onto
     `asset.joint.axis` by the local frames. Revolute limits are in degrees.
-    Passive friction and damping have no core attribute: Newton's and MuJoCo's
-    own (`newton:damping` per degree on revolute joints, as Newton reads it).
+    Passive friction, damping and springs have no core attribute: Newton's and
+    MuJoCo's own (`newton:damping` per degree on revolute joints, as Newton
+    reads it; `mjc:damping`, `mjc:stiffness` per radian, `mjc:springref` in degrees).
     """
     from pxr import Gf, Sdf, UsdPhysics
     from scipy.spatial.transform import Rotation
@@ -199,4 +200,9 @@ def _define_joint(stage, body_path, asset: Asset) -> None:
         float(j.damping * (np.pi / 180 if revolute else 1.0)))
     prim.CreateAttribute("newton:friction", Sdf.ValueTypeNames.Float).Set(friction)
     prim.CreateAttribute("mjc:frictionloss", Sdf.ValueTypeNames.Float).Set(friction)
+    # MuJoCo's passive joint terms: damping and stiffness per radian (SI), the spring's rest angle in
+    # degrees (MuJoCo's default compiler angle, as Newton's importer reads it)
+    prim.CreateAttribute("mjc:damping", Sdf.ValueTypeNames.Float).Set(float(j.damping))
+    prim.CreateAttribute("mjc:stiffness", Sdf.ValueTypeNames.Float).Set(float(j.stiffness))
+    prim.CreateAttribute("mjc:springref", Sdf.ValueTypeNames.Float).Set(float(to_unit(j.spring_ref)))
     UsdPhysics.ArticulationRootAPI.Apply(stage.GetPrimAtPath(body_path))

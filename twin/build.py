@@ -45,7 +45,7 @@ class BuildConfig:
     kind: Literal["free", "sliding", "prismatic", "revolute"] | None = None
     base_mesh: Path | None = None
     diagnose: bool = True
-    """Free bodies: look for missing physics after identification (pipelines/diagnose)."""
+    """Free bodies, drawers and doors: look for missing physics after identification (pipelines/diagnose)."""
     topics: tuple[tuple[str, str], ...] = ()
     """(role, topic) overrides for reading the recordings."""
     frames: tuple[tuple[str, str], ...] = ()
@@ -284,7 +284,8 @@ class DiagnoseRunConfig:
 def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = print) -> Path:
     """Diagnose the asset in config.output against recordings; rewrite its asset.json and report.html.
 
-    The identified parameters stay as built; effects, unexplained and provenance.diagnose are replaced.
+    The identified parameters and exported files stay as built (`twin build` carries chosen effects into
+    them); effects, unexplained and provenance.diagnose are replaced.
     """
     from assets import Inertial, Pose, asset_to_json, read_asset, write_asset
     from pipelines.diagnose import DiagnoseConfig, diagnose_held
@@ -301,18 +302,32 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
             raise BuildError(f"{path}: recording not found")
     asset = read_asset(out / "asset.json")
     provenance = asset.provenance
-    try:
-        uniform = provenance["prior"]["uniform"]
-        tracked = provenance["tracked_frame_in_object"]
-    except KeyError as exc:
-        raise BuildError(f"{out}/asset.json: provenance lacks {exc}; rebuild it with this version of twin") from exc
-    prior = Inertial(uniform["mass_kg"], tuple(uniform["com_m"]), np.asarray(uniform["inertia_kg_m2"]))
-    X_tracked_body = Pose(tuple(tracked["position"]), tuple(tracked["quaternion_xyzw"])).inverse()
     trials = [read_recording(p) for p in config.logs]
     holdout = read_recording(config.holdout) if config.holdout else None
-    diagnosis = diagnose_held(trials, holdout, X_tracked_body, prior,
-                              DiagnoseConfig(bootstraps=config.bootstraps,
-                                             window_s=asset.fit.window_s if asset.fit else 0.1))
+    try:
+        if asset.joint is not None:
+            from pipelines.diagnose import diagnose_jointed
+            from pipelines.identify.jointed import JointedConfig
+            from pipelines.identify.kind import detect_kind
+
+            p = provenance["prior"]
+            prior = Inertial(p["mass_kg"], tuple(p["com_m"]), np.asarray(p["inertia_kg_m2"]))
+            jconfig = JointedConfig(**provenance["identify"]["config"])
+        else:
+            uniform = provenance["prior"]["uniform"]
+            tracked = provenance["tracked_frame_in_object"]
+    except KeyError as exc:
+        raise BuildError(f"{out}/asset.json: provenance lacks {exc}; rebuild it with this version of twin") from exc
+    if asset.joint is not None:
+        joint = detect_kind(trials[0], asset.kind).joint
+        diagnosis, _ = diagnose_jointed(trials, holdout, joint, asset.placement, prior, jconfig,
+                                        DiagnoseConfig(bootstraps=config.bootstraps))
+    else:
+        prior = Inertial(uniform["mass_kg"], tuple(uniform["com_m"]), np.asarray(uniform["inertia_kg_m2"]))
+        X_tracked_body = Pose(tuple(tracked["position"]), tuple(tracked["quaternion_xyzw"])).inverse()
+        diagnosis = diagnose_held(trials, holdout, X_tracked_body, prior,
+                                  DiagnoseConfig(bootstraps=config.bootstraps,
+                                                 window_s=asset.fit.window_s if asset.fit else 0.1))
     _log_diagnosis(diagnosis, log)
     run = {"logs": [str(p) for p in config.logs], "holdout": str(config.holdout) if config.holdout else None}
     asset = replace(asset, effects=diagnosis.effects, unexplained=diagnosis.unexplained,

@@ -98,8 +98,9 @@ class Synth:
     material: str = "pla_printed"
     seed: int = 0
     effect: Literal["none", "sensor_bias", "time_delay", "viscous_damping", "quadratic_drag",
-                    "nonuniform_density"] = "none"
-    """Physics to conceal in both recordings (the model twin starts from lacks it)."""
+                    "nonuniform_density", "spring", "stribeck_friction"] = "none"
+    """Physics to conceal in both recordings (the model twin starts from lacks it); with --object:
+    viscous_damping, spring or stribeck_friction on the joint."""
     effect_magnitude: float = 2.0
     """Size of the concealed effect as a multiple of the sensor's noise (see twin/bench/diagnose.py)."""
 
@@ -200,10 +201,20 @@ def _run_synth(args: Synth) -> None:
     import trimesh
 
     if args.object is not None:
+        from pipelines.synth.held import SensorNoise
+        from pipelines.synth.jointed import jointed_paper_objects
         from pipelines.synth.sample import JointedSampleConfig, make_jointed_sample
+        from twin.bench.diagnose import concealed_joint_effect
 
+        effect = None
+        if args.effect != "none":
+            import numpy as np
+
+            effect = concealed_joint_effect(args.effect, args.effect_magnitude, np.random.default_rng(args.seed),
+                                            jointed_paper_objects()[args.object], SensorNoise())
+            _log(f"concealing {effect.name} {effect.params}")
         _log(f"synthesising {args.object} into {args.output}")
-        make_jointed_sample(args.output, JointedSampleConfig(object=args.object, seed=args.seed))
+        make_jointed_sample(args.output, JointedSampleConfig(object=args.object, seed=args.seed, effect=effect))
         _log(f"wrote {args.output}")
         return
 

@@ -61,7 +61,8 @@ def jointed_theta(identified, prior, joint_type: str):
 
 def build_jointed(config, trials, holdout, detection, mesh_object, placement, parts, prior, name, scan_stats,
                   timer, log, t_start) -> Path:
-    """Identify the part on its joint, export base + part + joint, validate, replay the held-out trial in MuJoCo."""
+    """Identify the part on its joint, look for missing passive joint forces, export base + part + joint,
+    validate, replay the held-out trial in MuJoCo."""
     import trimesh
 
     from assets import Asset, Fit, FitMetrics, Geometry, Joint, Material, asset_to_json, write_asset
@@ -70,18 +71,35 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     from pipelines.identify.kind import joint_coordinates
     from pipelines.validate import replay_jointed_mujoco, validate_jointed_exports
 
-    from .build import _write_meshes, staged_output
+    from .build import _log_diagnosis, _write_meshes, staged_output
 
     fit = detection.joint
     jconfig = JointedConfig()
     identified = timer.run("identify (Featherstone)", identify_jointed, trials, fit, placement, prior.inertial,
                            holdout, jconfig)
+    diagnosis, kept, diagnosis_skipped = None, identified, None
+    if config.diagnose:
+        from pipelines.diagnose import DiagnoseConfig, diagnose_jointed
+
+        try:
+            diagnosis, refit = timer.run("diagnose", diagnose_jointed, trials, holdout, fit, placement,
+                                         prior.inertial, jconfig, DiagnoseConfig())
+        except ValueError as exc:  # e.g. trial halves too short for one window each: the identified build stands
+            log(f"diagnose skipped: {exc}")
+            diagnosis_skipped = str(exc)
+        else:
+            _log_diagnosis(diagnosis, log)
+            # the identification lacked the effect, so its estimate is biased: the refit with it is kept
+            kept = refit or identified
+    found = {e.name: e.params for e in diagnosis.effects} if diagnosis else {}
     # every recording shows travel the part can make, the held-out one too
     q_all = np.concatenate([joint_coordinates(fit, t.pose) for t in (*trials, *filter(None, [holdout]))])
     lower, upper = joint_limits(fit.type, q_all)
-    joint = Joint(fit.type, tuple(fit.axis), tuple(fit.origin), lower, upper, axis_std_rad=fit.axis_std_rad,
-                  origin_std_m=tuple(fit.origin_std_m))
-    theta = jointed_theta(identified, prior, fit.type)
+    spring = found.get("spring", {"k": 0.0, "q0": 0.0})
+    joint = Joint(fit.type, tuple(fit.axis), tuple(fit.origin), lower, upper,
+                  damping=found.get("viscous_damping", {"b": 0.0})["b"], stiffness=spring["k"], spring_ref=spring["q0"],
+                  axis_std_rad=fit.axis_std_rad, origin_std_m=tuple(fit.origin_std_m))
+    theta = jointed_theta(kept, prior, fit.type)
     held = identified.fits.get("holdout", {})
     metrics = lambda d: FitMetrics(d["rmse_position_m"], d["rmse_q"] if fit.type == "revolute" else 0.0,  # noqa: E731
                                    d["rmse_q"])
@@ -100,7 +118,10 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
             geometry=Geometry("meshes/visual.obj", collision, base),
             material=Material(prior.material.name, float(theta.mass.value / mesh_object.volume), prior.friction[0]),
             joint=joint,
-            fit=Fit(metrics(held["prior"]), metrics(held[identified.selected]), jconfig.window_s) if held else None,
+            fit=Fit(metrics(held["prior"]), diagnosis.fits["after"] if kept is not identified else
+                    metrics(held[identified.selected]), jconfig.window_s) if held else None,
+            effects=diagnosis.effects if diagnosis else (),
+            unexplained=diagnosis.unexplained if diagnosis else (),
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), **({"report": "report.html"} if identified.traces else {})}
@@ -109,7 +130,9 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
         if holdout is not None:
             replay = {"mujoco": timer.run("replay (MuJoCo)", replay_jointed_mujoco, paths.mjcf, asset, holdout, fit,
                                           jconfig),
-                      "newton": held[identified.selected]}
+                      "newton": held[identified.selected] if kept is identified else
+                      {"rmse_q": diagnosis.fits["after"].loss,
+                       "rmse_position_m": diagnosis.fits["after"].rmse_position_m}}
             log(f"held-out replay: MuJoCo {replay['mujoco']}, Newton {replay['newton']}")
         provenance = {
             "config": json.loads(json.dumps(asdict(config), default=str)),
@@ -118,6 +141,9 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
             "prior": prior.provenance(),
             "kind": detection.to_json(),
             "identify": {"method": "featherstone", "config": asdict(jconfig), **identified.provenance()},
+            **({"diagnose": diagnosis.provenance() | {"refit": kept.provenance()}} if kept is not identified else
+               {"diagnose": diagnosis.provenance()} if diagnosis else
+               {"diagnose": {"skipped": diagnosis_skipped}} if diagnosis_skipped else {}),
             "validation": validation,
             "heldout_replay": replay,
             "timings_s": timer.seconds | {"total": time.perf_counter() - t_start},
@@ -133,6 +159,6 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
                 "measured_position": fit.tracked_position(tr["measured"]).reshape(-1, 3),
                 "baseline_position": fit.tracked_position(tr["prior"]).reshape(-1, 3),
                 "final_position": fit.tracked_position(tr["kept"]).reshape(-1, 3),
-            })
+            }, diagnosis.traces if diagnosis else None)
     log(f"wrote {out}/ ({fit.type} joint) in {time.perf_counter() - t_start:.1f} s")
     return out

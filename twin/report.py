@@ -68,24 +68,27 @@ def _diagnosis_plots(traces: dict) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
     t = np.asarray(traces["residual_t_s"])
-    for ax, part, label in ((axes[0], slice(0, 3), "force"), (axes[1], slice(3, 6), "torque")):
+    # a wrench residual has force and torque channels, a joint's one effort channel
+    parts = (((slice(0, 3), "force"), (slice(3, 6), "torque")) if np.asarray(traces["residual_before"]).shape[1] == 6
+             else ((slice(0, 1), "joint effort"),))
+    fig, axes = plt.subplots(len(parts) + 1, 1, figsize=(9, 8), sharex=True)
+    for ax, (part, label) in zip(axes, parts):
         for key, color in (("residual_before", "tab:red"), ("residual_after", "tab:blue")):
             r = np.linalg.norm(np.asarray(traces[key])[:, part], axis=1)
             ax.plot(t, r, lw=0.8, color=color, label=key.split("_")[1])
         ax.set_ylabel(f"|{label} residual| [noise]")
     axes[0].legend(loc="upper right")
-    axes[0].set_title("Wrench the model leaves unexplained, before and after the chosen effects")
+    axes[0].set_title("What the model leaves unexplained, before and after the chosen effects")
     tp = np.asarray(traces["t_s"])
     order = np.argsort(tp, kind="stable")
     measured = np.asarray(traces["measured_position"])
     for key, color in (("before_position", "tab:red"), ("after_position", "tab:blue")):
         err = np.linalg.norm(np.asarray(traces[key]) - measured, axis=1)
-        axes[2].semilogy(tp[order], np.maximum(err[order], 1e-7), ".", ms=2, color=color, label=key.split("_")[0])
-    axes[2].set_ylabel("position error [m]")
-    axes[2].set_xlabel("time [s]")
-    axes[2].legend(loc="upper right", markerscale=4)
+        axes[-1].semilogy(tp[order], np.maximum(err[order], 1e-7), ".", ms=2, color=color, label=key.split("_")[0])
+    axes[-1].set_ylabel("position error [m]")
+    axes[-1].set_xlabel("time [s]")
+    axes[-1].legend(loc="upper right", markerscale=4)
     return _figure_png(fig)
 
 

@@ -28,7 +28,8 @@ class ResidualAnalysis:
     xcorr_peak_lag_s [6] and xcorr_peak [6]: residual vs measured wrench of the same channel;
     correlation: feature -> [6] Pearson coefficients (velocity-like features use the linear
     velocity for force channels and the angular velocity for torque channels); localisation:
-    {"summary", "where": {"t_s": [a, b], "speed": [a, b]}, "share"} per stretch, largest first."""
+    {"summary", "where": {"t_s": [a, b], "speed": [a, b]}, "share"} per stretch, largest first;
+    channels: the residual's channel names (the wrench's six, or a joint's effort)."""
 
     rms: list[float]
     whiteness_p: list[float]
@@ -36,9 +37,10 @@ class ResidualAnalysis:
     xcorr_peak: list[float]
     correlation: dict[str, list[float]]
     localisation: list[dict]
+    channels: tuple[str, ...] = CHANNELS
 
     def to_json(self) -> dict:
-        return {"channels": list(CHANNELS), "rms_noise_units": self.rms, "whiteness_p": self.whiteness_p,
+        return {"channels": list(self.channels), "rms_noise_units": self.rms, "whiteness_p": self.whiteness_p,
                 "xcorr_peak_lag_s": self.xcorr_peak_lag_s, "xcorr_peak": self.xcorr_peak,
                 "correlation": self.correlation, "localisation": self.localisation}
 
@@ -105,7 +107,28 @@ def analyse_residuals(rows: NewtonEulerRows, residual: np.ndarray, *, stride: in
     )
 
 
-def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndarray, excess: float) -> list[dict]:
+def analyse_joint_residual(t_s: np.ndarray, q: np.ndarray, qd: np.ndarray, effort: np.ndarray,
+                           residual: np.ndarray, *, stride: int, unit: str, max_lag_s: float = 0.05,
+                           block_s: float = 0.25, excess: float = 4.0) -> ResidualAnalysis:
+    """Analyse a joint's effort residual [N] (noise units) against q, qd [m or rad, /s] and the effort;
+    `unit` names the speed's unit ("m/s" or "rad/s") in the localisation."""
+    rate_hz = 1.0 / float(np.median(np.diff(t_s)))
+    features = {"position": q - q[0], "velocity": qd, "sign_velocity": np.sign(qd), "speed_squared": np.abs(qd) * qd}
+    lag, peak = _peak_lag(residual, effort, int(round(max_lag_s * rate_hz)))
+    energy = uniform_filter1d(residual**2, max(1, int(block_s * rate_hz)))
+    return ResidualAnalysis(
+        rms=[float(np.sqrt(np.mean(residual**2)))],
+        whiteness_p=[_ljung_box_p(residual[::stride], 10)],
+        xcorr_peak_lag_s=[lag / rate_hz], xcorr_peak=[peak],
+        correlation={k: [_pearson(residual, f)] for k, f in features.items()},
+        localisation=_localise(t_s, energy, residual**2, np.abs(qd), excess, speed_name="|qdot|", speed_unit=unit,
+                               what="joint effort residual"),
+        channels=("effort",),
+    )
+
+
+def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndarray, excess: float,
+              speed_name: str = "|v|", speed_unit: str = "m/s", what: str = "wrench residual") -> list[dict]:
     """Stretches where the smoothed residual energy exceeds `excess` x its median, largest share first."""
     level = excess * np.median(energy)
     hot = energy > level
@@ -117,8 +140,8 @@ def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndar
         lo, hi = float(speed[a:b].min()), float(speed[a:b].max())
         ratio = float(np.sqrt(energy[a:b].max() / max(np.median(energy), 1e-30)))
         out.append({
-            "summary": f"wrench residual up to {ratio:.1f}x its typical size at t = {t[a]:.2f}-{t[b - 1]:.2f} s, "
-                       f"|v| = {lo:.2f}-{hi:.2f} m/s ({100 * share:.0f} % of the residual)",
+            "summary": f"{what} up to {ratio:.1f}x its typical size at t = {t[a]:.2f}-{t[b - 1]:.2f} s, "
+                       f"{speed_name} = {lo:.2f}-{hi:.2f} {speed_unit} ({100 * share:.0f} % of the residual)",
             "where": {"t_s": [float(t[a]), float(t[b - 1])], "speed": [lo, hi]},
             "share": share,
         })
@@ -128,12 +151,12 @@ def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndar
 def describe(analysis: ResidualAnalysis, threshold: float = 0.3) -> list[str]:
     """The analysis in words: non-white channels, delay-like lags, strong state correlations."""
     lines = []
-    for j, ch in enumerate(CHANNELS):
+    for j, ch in enumerate(analysis.channels):
         if analysis.whiteness_p[j] < 1e-3:
             lines.append(f"{ch}: residual not white (Ljung-Box p = {analysis.whiteness_p[j]:.1e}), "
                          f"RMS {analysis.rms[j]:.2f}x noise")
         if analysis.xcorr_peak_lag_s[j] != 0 and abs(analysis.xcorr_peak[j]) > threshold:
-            lines.append(f"{ch}: residual peaks against the measured wrench at lag "
+            lines.append(f"{ch}: residual peaks against the measured {'wrench' if ch in CHANNELS else ch} at lag "
                          f"{1000 * analysis.xcorr_peak_lag_s[j]:+.0f} ms (r = {analysis.xcorr_peak[j]:.2f})")
         for k, values in analysis.correlation.items():
             if abs(values[j]) > threshold:

@@ -21,14 +21,16 @@ from .effects import CANDIDATES
 
 @dataclass(frozen=True)
 class Library:
-    """Noise-scaled regression rows: X [n, 10 + sum k] (inertial columns first), y [n], the
-    column range of each candidate, the sample index of each row and the thinning stride."""
+    """Noise-scaled regression rows: X [n, base + sum k] (the base model's columns first, e.g. the 10
+    inertial ones), y [n], the column range of each candidate, the sample index of each row and the
+    thinning stride."""
 
     X: np.ndarray
     y: np.ndarray
     groups: dict[str, tuple[int, int]]
     sample: np.ndarray
     stride: int
+    base: int = 10
 
 
 @dataclass(frozen=True)
@@ -71,8 +73,8 @@ def build_library(rows: list[NewtonEulerRows], com_tracked: np.ndarray, names=tu
 
 
 def fit_subset(lib: Library, names, rows_mask: np.ndarray | None = None) -> tuple[np.ndarray, float, int]:
-    """Least squares on the inertial columns plus `names`' columns: (coefficients, RSS, rows)."""
-    cols = list(range(10)) + [c for n in names for c in range(*lib.groups[n])]
+    """Least squares on the base columns plus `names`' columns: (coefficients, RSS, rows)."""
+    cols = list(range(lib.base)) + [c for n in names for c in range(*lib.groups[n])]
     X, y = lib.X[:, cols], lib.y
     if rows_mask is not None:
         X, y = X[rows_mask], y[rows_mask]
@@ -91,7 +93,7 @@ def backward_eliminate(lib: Library, rows_mask: np.ndarray | None = None) -> tup
 
     def score(names):
         _, rss, n = fit_subset(lib, names, rows_mask)
-        return bic(rss, n, 10 + sum(lib.groups[g][1] - lib.groups[g][0] for g in names))
+        return bic(rss, n, lib.base + sum(lib.groups[g][1] - lib.groups[g][0] for g in names))
 
     current = score(kept)
     while kept:
@@ -111,7 +113,7 @@ def screen(lib: Library, rng: np.random.Generator, bootstraps: int = 40, block_s
     """
     selected = backward_eliminate(lib)
     coef, _, _ = fit_subset(lib, selected)
-    coefficients, at = {}, 10
+    coefficients, at = {}, lib.base
     for name in selected:
         k = lib.groups[name][1] - lib.groups[name][0]
         coefficients[name] = coef[at:at + k].tolist()
@@ -125,7 +127,7 @@ def screen(lib: Library, rng: np.random.Generator, bootstraps: int = 40, block_s
     for _ in range(bootstraps):
         pick = rng.integers(0, block_count, block_count)
         idx = np.concatenate([rows_of_block[b] for b in pick])
-        boot = Library(lib.X[idx], lib.y[idx], lib.groups, lib.sample[idx], lib.stride)
+        boot = Library(lib.X[idx], lib.y[idx], lib.groups, lib.sample[idx], lib.stride, lib.base)
         for name in backward_eliminate(boot):
             counts[name] += 1
     return Screening({k: v / max(bootstraps, 1) for k, v in counts.items()}, selected, coefficients, bootstraps)

@@ -202,10 +202,16 @@ def _residual(rows: NewtonEulerRows, model: _Model, com_tracked: np.ndarray) -> 
 
 def _replay(recording, X_tracked_body: Pose, inertial: Inertial, effect: np.ndarray, delay_s: float,
             window_s: float) -> tuple[FitMetrics, dict]:
-    """Newton windowed replay of `recording` with the effects; position error and traces."""
+    """Newton windowed replay of `recording` with the effects; position error and traces.
+
+    Poses and wrench are low-passed (zero phase) at the identification's cutoff first, so each window starts
+    from the smoothed measured state and is compared with the smoothed track: tracker noise on a start
+    velocity would otherwise set a floor that hides any effect below it. Before and after alike.
+    """
     p, w = recording.pose, recording.wrench
+    id_config = IdentifyConfig()
     windows = make_windows(p.t_s, p.position, p.quat_xyzw, w.t_s - delay_s, w.force, w.torque, window_s=window_s,
-                           substeps=IdentifyConfig().substeps)
+                           substeps=id_config.substeps, smoothing_hz=id_config.smoothing_hz)
     rollout = FreeBodyRollout(windows, X_tracked_body, sets=1, requires_grad=False)
     theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())[None]
     r = rollout.residuals(theta, momentum_scaled=False, effect=effect[None])[:, 0]

@@ -33,12 +33,30 @@ from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
 
+from pipelines.synth.jointed import passive_joint_force
+
 from .kind import JointFit, joint_coordinates
 from .windows import lowpass
 
-__all__ = ["JointedConfig", "JointedIdentification", "identify_jointed", "joint_effort"]
+__all__ = ["JOINT_EFFECT_PARAMS", "JointedConfig", "JointedIdentification", "equation_of_motion_rows",
+           "identify_jointed", "joint_body", "joint_effect_columns", "joint_effort", "replay_jointed"]
 
 GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
+
+JOINT_EFFECT_PARAMS = {
+    "viscous_damping": ("damping",),
+    "spring": ("stiffness", "spring_force"),
+    "stribeck_friction": ("stribeck", "stribeck_speed"),
+}
+"""Passive joint forces the identification can add (DESIGN.md names) and their parameters: damping b
+[N s/m or N m s/rad]; stiffness k [N/m or N m/rad] and spring_force k q0 [N or N m]; stribeck, the
+breakaway excess f_s - f_c [N or N m], and stribeck_speed v_s [m/s or rad/s]. Their slots in the
+rollout's passive-force vector follow `pipelines.synth.jointed.JOINT_EFFECT_SIZE`."""
+POSITIVE_EFFECT_PARAMS = ("damping", "stiffness", "stribeck", "stribeck_speed")
+"""Passive forces only: damping and stiffness dissipate or restore, breakaway friction exceeds sliding friction."""
+_EFFECT_SLOT = {"damping": 0, "stiffness": 1, "spring_force": 2, "stribeck": 3, "stribeck_speed": 4}
+STRIBECK_SPEEDS = np.geomspace(0.003, 0.3, 25)
+"""Grid of v_s [m/s or rad/s] searched by the least-squares start (the model is linear in the rest)."""
 
 
 @dataclass(frozen=True)
@@ -164,18 +182,22 @@ def _concat(parts: list[_Windows]) -> _Windows:
 
 
 @wp.kernel
-def apply_window_effort_and_friction(
+def apply_window_effort_and_passive_forces(
     effort: wp.array2d[float],
     step: int,
     window_count: int,
     friction: wp.array[float],
     smoothing: float,
+    effect: wp.array2d[float],
+    joint_q: wp.array[float],
     joint_qd: wp.array[float],
     joint_f: wp.array[float],
 ):
-    """Generalized force [N or N m] of world w: its window's measured effort minus f_c tanh(qd / eps)."""
+    """Generalized force [N or N m] of world w: its window's measured effort plus the joint's passive forces
+    (Coulomb friction and the effects in `effect`, see `passive_joint_force`)."""
     w = wp.tid()
-    joint_f[w] = effort[step, w % window_count] - friction[w] * wp.tanh(joint_qd[w] / smoothing)
+    joint_f[w] = effort[step, w % window_count] + passive_joint_force(joint_q[w], joint_qd[w], friction[w],
+                                                                      smoothing, effect, w)
 
 
 class _Rollout:
@@ -185,7 +207,7 @@ class _Rollout:
                  smoothing: float, device: str = "cpu"):
         import newton
 
-        from pipelines.synth.jointed import add_jointed_part
+        from pipelines.synth.jointed import JOINT_EFFECT_SIZE, add_jointed_part
 
         self.windows, self.V, self.device, self.smoothing = windows, variants, device, smoothing
         W = windows.q.shape[1]
@@ -198,9 +220,12 @@ class _Rollout:
         self.control = self.model.control()
         self.effort = wp.array(windows.effort.astype(np.float32), dtype=float, device=device)
         self.friction = wp.zeros(variants * W, dtype=float, device=device)
+        self.effect = wp.zeros((variants * W, JOINT_EFFECT_SIZE), dtype=float, device=device)
 
-    def run(self, inertials: list[Inertial], friction: np.ndarray, dq0: np.ndarray, dqd0: np.ndarray) -> np.ndarray:
-        """q [S+1, V, W] of every window for each variant's body, friction [V] and start offsets [V, W]."""
+    def run(self, inertials: list[Inertial], friction: np.ndarray, effect: np.ndarray, dq0: np.ndarray,
+            dqd0: np.ndarray) -> np.ndarray:
+        """q [S+1, V, W] of every window for each variant's body, friction [V], passive-force vector
+        [V, JOINT_EFFECT_SIZE] and start offsets [V, W]."""
         import newton
 
         w = self.windows
@@ -216,6 +241,7 @@ class _Rollout:
         model.body_inv_inertia.assign(np.linalg.inv(inertia).astype(np.float32))
         self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
         self.friction.assign(np.repeat(friction, W).astype(np.float32))
+        self.effect.assign(np.repeat(effect, W, axis=0).astype(np.float32))
         s0, s1 = self.states
         s0.joint_q.assign((w.q_start[None, :] + dq0).reshape(-1).astype(np.float32))
         s0.joint_qd.assign((w.qd_start[None, :] + dqd0).reshape(-1).astype(np.float32))
@@ -224,8 +250,9 @@ class _Rollout:
         out = np.zeros((S + 1, self.V * W))
         out[0] = s0.joint_q.numpy()
         for step in range(S * w.substeps):
-            wp.launch(apply_window_effort_and_friction, dim=self.V * W,
-                      inputs=[self.effort, step, W, self.friction, self.smoothing, s0.joint_qd],
+            wp.launch(apply_window_effort_and_passive_forces, dim=self.V * W,
+                      inputs=[self.effort, step, W, self.friction, self.smoothing, self.effect, s0.joint_q,
+                              s0.joint_qd],
                       outputs=[self.control.joint_f], device=self.device)
             self.solver.step(s0, s1, self.control, None, w.dt_s)
             s0, s1 = s1, s0
@@ -238,7 +265,7 @@ class _Rollout:
 class _BodyMap:
     """Identified parameters -> the body in the object frame, the rest from the prior."""
 
-    def __init__(self, joint: JointFit, placement: Pose, prior: Inertial, gravity: bool):
+    def __init__(self, joint: JointFit, placement: Pose, prior: Inertial, gravity: bool, effects: tuple[str, ...] = ()):
         self.joint, self.placement, self.prior = joint, placement, prior
         a = joint.axis
         self.R = placement.rotation_matrix()
@@ -258,14 +285,32 @@ class _BodyMap:
             self.names = ("axis_inertia", "gravity_moment_e1", "gravity_moment_e2", "friction")
         else:
             self.names = ("axis_inertia", "friction")
+        self.base_count = len(self.names)
+        unknown = set(effects) - set(JOINT_EFFECT_PARAMS)
+        if unknown:
+            raise ValueError(f"{sorted(unknown)}: not joint effects ({', '.join(JOINT_EFFECT_PARAMS)})")
+        self.names += tuple(n for e in JOINT_EFFECT_PARAMS if e in effects for n in JOINT_EFFECT_PARAMS[e])
+
+    def friction(self, p: np.ndarray) -> float:
+        return float(p[self.names.index("friction")])
+
+    def effect(self, p: np.ndarray) -> np.ndarray:
+        """The rollout's passive-force vector of parameters `p` (zeros, v_s = 1, for effects not fitted)."""
+        out = np.zeros(len(_EFFECT_SLOT))
+        out[_EFFECT_SLOT["stribeck_speed"]] = 1.0
+        for name, value in zip(self.names[self.base_count:], p[self.base_count:]):
+            out[_EFFECT_SLOT[name]] = value
+        return out
 
     def prior_values(self, friction0: float) -> np.ndarray:
+        """The prior body with friction `friction0` and no passive effect."""
+        effects = [1.0 if n == "stribeck_speed" else 0.0 for n in self.names[self.base_count:]]
         if self.joint.type == "prismatic":
-            return np.array([self.prior.mass, friction0])
+            return np.array([self.prior.mass, friction0, *effects])
         a = self.joint.axis
         d = self.prior_md / self.prior.mass
         I_a = a @ self.I0_world @ a + self.prior.mass * d @ d
-        return np.array([I_a, *(self.prior_md if len(self.names) == 4 else ()), friction0])
+        return np.array([I_a, *(self.prior_md if self.base_count == 4 else ()), friction0, *effects])
 
     def inertial(self, p: np.ndarray) -> Inertial:
         prior, a = self.prior, self.joint.axis
@@ -273,7 +318,7 @@ class _BodyMap:
             m = p[0]
             return Inertial(m, prior.com, prior.inertia_matrix() * (m / prior.mass))
         m = prior.mass
-        md = p[1:3] if len(self.names) == 4 else self.prior_md
+        md = p[1:3] if self.base_count == 4 else self.prior_md
         r_perp = (md / m) @ self.basis
         com_world = self.joint.origin + self.along + r_perp
         com = self.R.T @ (com_world - np.asarray(self.placement.position))
@@ -282,47 +327,94 @@ class _BodyMap:
         return Inertial(m, com, prior.inertia_matrix() * scale)
 
 
+def equation_of_motion_rows(recording, joint: JointFit, body: _BodyMap, config: JointedConfig) -> dict:
+    """One recording's equation of motion as regression rows on a uniform grid (zero-phase low-passed q
+    and tau), ends trimmed: "t_s", "q", "qd", "tau" [N], "columns" [N, base parameters] such that
+    columns @ (base parameters) = tau in the base model."""
+    t = recording.pose.t_s
+    q = joint_coordinates(joint, recording.pose)
+    period = float(np.median(np.diff(t)))
+    grid = np.arange(t[0], t[-1], period)
+    qs = lowpass(np.interp(grid, t, q), config.smoothing_hz, 1 / period)
+    qd = np.gradient(qs, period)
+    qdd = np.gradient(qd, period)
+    t_w, tau = joint_effort(recording, joint)
+    tau = np.interp(grid, t_w, lowpass(tau, config.smoothing_hz, 1 / float(np.median(np.diff(t_w)))))
+    # rows start once the part moves: while it is held still, tracker noise in q' switches tanh(q'/eps) at random
+    start = int(np.argmax(np.abs(qs - qs[0]) > 0.02 * np.ptp(qs)))
+    keep = slice(max(20, start), -20)
+    cols = [qdd]
+    if body.joint.type == "prismatic":
+        cols[0] = qdd - GRAVITY_M_S2 @ joint.axis  # m (q'' - g.a) = tau - friction
+    elif body.base_count == 4:
+        R_q = Rotation.from_rotvec(np.outer(qs, joint.axis))
+        for e in body.basis:  # M q'' - a.(R(q) e x g) (m d)_e
+            cols.append(-(np.cross(R_q.apply(e), GRAVITY_M_S2) @ joint.axis))
+    # the friction step is low-passed like tau, or the smeared step in tau reads as a breakaway force
+    cols.append(lowpass(np.tanh(qd / config.friction_smoothing), config.smoothing_hz, 1 / period))
+    return {"t_s": grid[keep], "q": qs[keep], "qd": qd[keep], "tau": tau[keep], "columns": np.stack(cols, 1)[keep],
+            "rate_hz": 1 / period}
+
+
+def joint_effect_columns(name: str, rows: dict, config: JointedConfig, stribeck_speed: float = 1.0) -> np.ndarray:
+    """[N, k] regression columns of effect `name`'s linear parameters (tau = ... + columns @ x): the
+    robot pushes against the passive force; stribeck_friction at a given v_s."""
+    q, qd = rows["q"], rows["qd"]
+    if name == "viscous_damping":
+        return qd[:, None]
+    if name == "spring":
+        return np.stack([q, -np.ones_like(q)], 1)
+    if name == "stribeck_friction":  # low-passed like tau (see `equation_of_motion_rows`)
+        column = np.exp(-(qd / stribeck_speed) ** 2) * np.tanh(qd / config.friction_smoothing)
+        return lowpass(column, config.smoothing_hz, rows["rate_hz"])[:, None]
+    raise ValueError(f"{name}: not a joint effect ({', '.join(JOINT_EFFECT_PARAMS)})")
+
+
 def _least_squares(parts, joint: JointFit, body: _BodyMap, config: JointedConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Linear least squares on the equation of motion (zero-phase low-passed q and tau); values and covariance."""
-    rows, rhs = [], []
-    for recording in parts:
-        t = recording.pose.t_s
-        q = joint_coordinates(joint, recording.pose)
-        period = float(np.median(np.diff(t)))
-        grid = np.arange(t[0], t[-1], period)
-        qs = lowpass(np.interp(grid, t, q), config.smoothing_hz, 1 / period)
-        qd = np.gradient(qs, period)
-        qdd = np.gradient(qd, period)
-        t_w, tau = joint_effort(recording, joint)
-        tau = np.interp(grid, t_w, lowpass(tau, config.smoothing_hz, 1 / float(np.median(np.diff(t_w)))))
-        keep = slice(20, -20)
-        cols = [qdd]
-        if body.joint.type == "prismatic":
-            cols[0] = qdd - GRAVITY_M_S2 @ joint.axis  # m (q'' - g.a) = tau - friction
-        elif len(body.names) == 4:
-            R_q = Rotation.from_rotvec(np.outer(qs, joint.axis))
-            for e in body.basis:  # M q'' - a.(R(q) e x g) (m d)_e
-                cols.append(-(np.cross(R_q.apply(e), GRAVITY_M_S2) @ joint.axis))
-        cols.append(np.tanh(qd / config.friction_smoothing))
-        rows.append(np.stack(cols, 1)[keep])
-        rhs.append(tau[keep])
-    A, b = np.concatenate(rows), np.concatenate(rhs)
+    """Linear least squares on the equation of motion (zero-phase low-passed q and tau); values and covariance.
+    A Stribeck speed is searched on a grid, and its covariance taken from the linearised column at the best."""
+    rows = [equation_of_motion_rows(r, joint, body, config) for r in parts]
+    effects = [e for e, names in JOINT_EFFECT_PARAMS.items() if names[0] in body.names]
+
+    def design(v_s):
+        return np.concatenate([np.concatenate([r["columns"]] + [joint_effect_columns(e, r, config, v_s)
+                                                                for e in effects], 1) for r in rows])
+
+    b = np.concatenate([r["tau"] for r in rows])
+    v_s = 1.0
+    if "stribeck_friction" in effects:
+        rss = [np.sum((b - design(v) @ np.linalg.lstsq(design(v), b, rcond=None)[0]) ** 2) for v in STRIBECK_SPEEDS]
+        v_s = float(STRIBECK_SPEEDS[int(np.argmin(rss))])
+    A = design(v_s)
     x, *_ = np.linalg.lstsq(A, b, rcond=None)
-    r = b - A @ x
-    cov = (r @ r) / max(1, len(b) - len(x)) * np.linalg.inv(A.T @ A)
+    residual = b - A @ x
+    if "stribeck_friction" in effects:
+        d_vs = x[-1] * np.concatenate([lowpass(2 * r["qd"]**2 / v_s**3 * np.exp(-(r["qd"] / v_s) ** 2)
+                                               * np.tanh(r["qd"] / config.friction_smoothing), config.smoothing_hz,
+                                               r["rate_hz"]) for r in rows])
+        A, x = np.column_stack([A, d_vs]), np.append(x, v_s)
+    cov = (residual @ residual) / max(1, len(b) - len(x)) * np.linalg.pinv(A.T @ A)
     return x, cov
 
 
+def joint_body(joint: JointFit, placement: Pose, prior: Inertial, config: JointedConfig = JointedConfig(),
+               effects: tuple[str, ...] = ()) -> _BodyMap:
+    """The map from identified parameters (names in `.names`) to the body, with `effects`' parameters after."""
+    tilt = np.linalg.norm(np.cross(joint.axis, [0.0, 0.0, 1.0]))
+    gravity = joint.type == "revolute" and tilt >= np.sin(config.gravity_min_tilt_rad)
+    return _BodyMap(joint, placement, prior, gravity, effects)
+
+
 def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, holdout=None,
-                     config: JointedConfig = JointedConfig(), progress=None) -> JointedIdentification:
+                     config: JointedConfig = JointedConfig(), progress=None,
+                     effects: tuple[str, ...] = ()) -> JointedIdentification:
     """Identify the part's joint physics from `trials` (Recordings) on the joint found by `detect_kind`.
 
     placement: the object frame in world at q = 0; prior: the part's prior body
     (object frame). holdout: a Recording whose windowed replay RMSE is reported.
+    effects: passive joint forces (JOINT_EFFECT_PARAMS) fitted with the body, their parameters after it.
     """
-    tilt = np.linalg.norm(np.cross(joint.axis, [0.0, 0.0, 1.0]))
-    gravity = joint.type == "revolute" and tilt >= np.sin(config.gravity_min_tilt_rad)
-    body = _BodyMap(joint, placement, prior, gravity)
+    body = joint_body(joint, placement, prior, config, effects)
     x_ls, cov_ls = _least_squares(trials, joint, body, config)
     least_squares = {n: {"value": float(v), "std": float(np.sqrt(cov_ls[i, i]))}
                      for i, (n, v) in enumerate(zip(body.names, x_ls))}
@@ -351,7 +443,8 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
             starts_q += [dq0 + s * hq, dq0]
             starts_qd += [dqd0, dqd0 + s * hqd]
         inertials = [body.inertial(pp) for pp in params]
-        q = rollout.run(inertials, np.array([pp[-1] for pp in params]), np.array(starts_q), np.array(starts_qd))
+        q = rollout.run(inertials, np.array([body.friction(pp) for pp in params]),
+                        np.array([body.effect(pp) for pp in params]), np.array(starts_q), np.array(starts_qd))
         r = (q[1:] - windows.q[1:][:, None, :]) / sigma_q
         J = np.stack([(r[:, 1 + 2 * i] - r[:, 2 + 2 * i]) / (2 * h[i]) for i in range(P)])
         k = 1 + 2 * P
@@ -372,19 +465,37 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
         A_s = A - np.einsum("iwa,wab,jwb->ij", B, Cinv, B)
         g_s = g - np.einsum("iwa,wab,wb->i", B, Cinv, h)
         A_s = A_s + lam * np.diag(np.diag(A_s))
-        dp = -np.linalg.solve(A_s, g_s)
+        dp = -np.linalg.lstsq(A_s, g_s, rcond=None)[0]  # a parameter the windows do not see stays put
         ds = -np.einsum("wab,wb->wa", Cinv, h + np.einsum("iwa,i->wa", B, dp))
         return dp, ds, A_s
 
     p = x_ls.copy()
+    if p[0] <= 0:  # a mass or axis inertia the least squares cannot place (a model that lacks a force): the prior's
+        p[0] = body.prior_values(0.0)[0]
+    positive = [0] + [i for i, n in enumerate(body.names) if n in POSITIVE_EFFECT_PARAMS]
+    for i in positive[1:]:  # a passive force the least squares puts on the wrong side starts one std inside
+        p[i] = max(p[i], np.sqrt(cov_ls[i, i]))
     dq0, dqd0 = np.zeros((1, W)), np.zeros((1, W))
-    r, J, Jq, Jqd = evaluate(p, dq0[0], dqd0[0])
+    starts = [p]
+    if "stribeck" in body.names:
+        # the low-passed least squares cannot resolve a breakaway at reversals: a few starts, the best kept
+        i, j = body.names.index("stribeck"), body.names.index("stribeck_speed")
+        speed = float(np.sqrt(np.mean(windows.qd_start**2)))
+        k = body.names.index("friction")
+        f_c = max(p[k], np.sqrt(cov_ls[k, k]))
+        for excess in (f_c, 3 * f_c):
+            for v_s in (0.05 * speed, 0.15 * speed):
+                start = p.copy()
+                start[i], start[j] = excess, v_s
+                starts.append(start)
+    evaluated = [(start, *evaluate(start, dq0[0], dqd0[0])) for start in starts]
+    p, r, J, Jq, Jqd = min(evaluated, key=lambda e: float(np.sum(e[1] ** 2)))
     loss = float(np.sum(r * r))
     history, lam = [loss], 1e-3
     for _ in range(config.max_iterations):
         dp, ds, _ = solve(r, J, Jq, Jqd, lam)
         trial = (p + dp, dq0[0] + ds[:, 0], dqd0[0] + ds[:, 1])
-        if body.joint.type == "prismatic" and trial[0][0] <= 0:
+        if np.any(trial[0][positive] <= 0):
             lam *= 10
             continue
         r2, J2, Jq2, Jqd2 = evaluate(*trial)
@@ -406,7 +517,7 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
 
     # window-clustered sandwich: the bread with start offsets eliminated, the meat from per-window scores
     _, _, A_s = solve(r, J, Jq, Jqd, 0.0)
-    bread = np.linalg.inv(A_s)
+    bread = np.linalg.pinv(A_s)
     C_w = np.stack([np.stack([(Jq * Jq).sum(0), (Jq * Jqd).sum(0)], -1),
                     np.stack([(Jq * Jqd).sum(0), (Jqd * Jqd).sum(0)], -1)], -2)
     B = np.stack([np.einsum("isw,sw->iw", J, Jq), np.einsum("isw,sw->iw", J, Jqd)], -1)
@@ -417,7 +528,7 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
     fits = {"window_s": config.window_s, "trial_rmse_q": float(np.sqrt(np.mean(r * r)))}
     selected, traces = "newton", None
     if holdout is not None:
-        replays = {name: _replay(holdout, joint, placement, prior, body, values, config)
+        replays = {name: replay_jointed(holdout, joint, placement, prior, body, values, config)
                    for name, values in (("prior", body.prior_values(0.0)), ("least_squares", x_ls), ("newton", p))}
         fits["holdout"] = {name: replay[0] for name, replay in replays.items()}
         if fits["holdout"]["least_squares"]["rmse_q"] < fits["holdout"]["newton"]["rmse_q"]:
@@ -428,12 +539,13 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
                                  fits, tuple(history), selected, traces)
 
 
-def _replay(recording, joint, placement, prior, body: _BodyMap, p, config: JointedConfig):
+def replay_jointed(recording, joint, placement, prior, body: _BodyMap, p, config: JointedConfig):
     """Windowed replay of `recording` from measured starts: (RMSE of q and of the tracked frame's position,
     simulated q [S, W], the windows)."""
     w = joint_windows(recording, joint, config)
     q = _Rollout(w, 1, joint, placement, prior, config.friction_smoothing).run(
-        [body.inertial(p)], np.array([p[-1]]), np.zeros((1, w.q.shape[1])), np.zeros((1, w.q.shape[1])))[1:, 0]
+        [body.inertial(p)], np.array([body.friction(p)]), body.effect(p)[None], np.zeros((1, w.q.shape[1])),
+        np.zeros((1, w.q.shape[1])))[1:, 0]
     return q_and_position_rmse(joint, q, w.q[1:]), q, w
 
 

@@ -14,7 +14,7 @@ class ShootingWindows:
 
     dt_s: simulation step [s]; substeps: steps per pose sample; t_start_s [W];
     wrench [steps, W, 6]: force [N] and torque about the tracked origin [N m], world
-    axes, zero-order hold of the sensor samples; measured_position [S+1, W, 3] [m]
+    axes, linearly interpolated between the sensor samples; measured_position [S+1, W, 3] [m]
     and measured_quat_xyzw [S+1, W, 4]: the tracked frame, sample 0 the start;
     start_twist [W, 6]: tracked-origin velocity [m/s] and angular velocity [rad/s]
     at the start, estimated from the poses.
@@ -150,9 +150,9 @@ def make_windows(
     dt = period / substeps
     steps = samples * substeps
     t_step = grid[starts][None, :] + dt * np.arange(steps)[:, None]  # [steps, W]
-    # zero-order hold: the latest sensor sample at or before each step
-    idx = np.clip(np.searchsorted(wrench_t_s, t_step + 1e-9, side="right") - 1, 0, len(wrench_t_s) - 1)
-    wrench = np.concatenate([np.asarray(wrench_force)[idx], np.asarray(wrench_torque)[idx]], axis=-1)
+    # a sensor point-samples a continuous wrench: linear interpolation between samples at each step
+    samples_w = np.concatenate([np.asarray(wrench_force), np.asarray(wrench_torque)], axis=-1)
+    wrench = np.stack([np.interp(t_step, wrench_t_s, samples_w[:, c]) for c in range(6)], axis=-1)
 
     sample_idx = starts[None, :] + np.arange(samples + 1)[:, None]  # [S+1, W]
     twist = np.stack([local_twist(grid, pos, rot, i, twist_half_width) for i in starts])

@@ -27,9 +27,9 @@ class HeldMotionConfig:
     hold_s: float = 0.4
     """Still hold at the scanned placement before the motion starts [s]."""
     control_rate_hz: float = 500.0
-    """Controller and F/T sensor rate [Hz]; the wrench is held constant between updates."""
+    """F/T sensor rate [Hz]: it point-samples the wrench, which the controller updates every Newton step."""
     substeps: int = 8
-    """Newton steps per control period."""
+    """Newton steps per sensor period."""
     translation_amplitude_m: float = 0.05
     """Peak reference displacement per axis [m]."""
     translation_band_hz: tuple[float, float] = (0.5, 2.5)
@@ -68,6 +68,8 @@ class ConcealedEffect:
     viscous_damping {b, b_angular} and quadratic_drag {c} act on the body in the simulation;
     sensor_bias {force, torque} (grasp-frame axes) and time_delay {seconds} act on the
     sensor; nonuniform_density {com_shift} moves the true COM off the uniform-density one.
+    On a joint (`pipelines.synth.jointed`): viscous_damping {b}, spring {k, q0} and
+    stribeck_friction {f_s, f_c, v_s} are passive joint forces.
     """
 
     name: str
@@ -83,14 +85,16 @@ class ConcealedEffect:
     def body_wrench(self, v_com: np.ndarray, omega: np.ndarray) -> np.ndarray:
         """Force [N] and torque [N m] about the COM, world axes, that the effect puts on the body."""
         if self.name == "viscous_damping":
-            return np.concatenate([-self.params["b"] * v_com, -self.params["b_angular"] * omega])
+            return np.concatenate([-self.params["b"] * v_com, -self.params.get("b_angular", 0.0) * omega])
         if self.name == "quadratic_drag":
             return np.concatenate([-self.params["c"] * np.linalg.norm(v_com) * v_com, np.zeros(3)])
         return np.zeros(6)
 
 
 EFFECT_PARAMS = {
-    "viscous_damping": ("b", "b_angular"),
+    "viscous_damping": ("b",),
+    "spring": ("k", "q0"),
+    "stribeck_friction": ("f_s", "f_c", "v_s"),
     "quadratic_drag": ("c",),
     "sensor_bias": ("force", "torque"),
     "time_delay": ("seconds",),
@@ -102,9 +106,9 @@ EFFECT_PARAMS = {
 class HeldMotion:
     """What happened, noise-free. World frame; the grasp frame is the tracked frame.
 
-    t_wrench_s [K]: control update times; force_n [K,3] and torque_nm [K,3]: the
-    wrench applied to the object at the grasp frame origin, world axes, held
-    until the next update. t_pose_s [N]; grasp_position_m [N,3];
+    t_wrench_s [K]: sensor sample times; force_n [K,3] and torque_nm [K,3]: the
+    wrench applied to the object at the grasp frame origin, world axes, at those
+    times (it varies continuously between them). t_pose_s [N]; grasp_position_m [N,3];
     grasp_quat_xyzw [N,4]: the grasp frame in world.
     """
 
@@ -202,15 +206,18 @@ def simulate_held(
     kp, kd = config.stiffness_1_s2, config.damping_1_s
     body_f = np.zeros((model.body_count, 6), dtype=np.float32)
 
-    for k in range(steps):
+    # The controller acts continuously (evaluated every Newton step, so the applied wrench has no
+    # zero-order hold at the sensor's period); the F/T sensor point-samples it at the control rate.
+    for i in range(steps * config.substeps):
         q = state_a.body_q.numpy()[body].astype(float)
         qd = state_a.body_qd.numpy()[body].astype(float)
+        body_q_substeps[i] = q
         R = Rotation.from_quat(q[3:7]).as_matrix()
         p_com = q[:3] + R @ com_obj
         v_com, omega = qd[:3], qd[3:6]
 
         # The reference moves the COM and turns the body about it; the grasp follows rigidly.
-        d, dd, ddd = reference(k * control_dt)
+        d, dd, ddd = reference(i * sim_dt)
         R_ref = Rotation.from_rotvec(d[3:]).as_matrix() @ R0
         rot_err = Rotation.from_matrix(R_ref @ R.T).as_rotvec()
         alpha = ddd[3:] + kp * rot_err + kd * (dd[3:] - omega)
@@ -219,23 +226,17 @@ def simulate_held(
         I_world = R @ I_body @ R.T
         tau_com = I_world @ alpha + np.cross(omega, I_world @ omega)
         p_grasp = q[:3] + R @ T_grasp[:3, 3]
-        force[k] = f
-        torque_grasp[k] = tau_com - np.cross(p_grasp - p_com, f)
+        t_grasp = tau_com - np.cross(p_grasp - p_com, f)
+        if i % config.substeps == 0:
+            force[i // config.substeps], torque_grasp[i // config.substeps] = f, t_grasp
 
-        # The robot's wrench acts at the grasp: within a control period the force and
-        # the torque about the grasp origin stay fixed in world axes while the body turns.
-        for j in range(config.substeps):
-            qj = state_a.body_q.numpy()[body].astype(float)
-            body_q_substeps[k * config.substeps + j] = qj
-            Rj = Rotation.from_quat(qj[3:7])
-            arm = Rj.apply(T_grasp[:3, 3] - com_obj)
-            body_f[body] = np.concatenate([f, torque_grasp[k] + np.cross(arm, f)])
-            if effect is not None:
-                qdj = state_a.body_qd.numpy()[body].astype(float)
-                body_f[body] += effect.body_wrench(qdj[:3], qdj[3:6])
-            state_a.body_f.assign(body_f)
-            solver.step(state_a, state_b, control, None, sim_dt)
-            state_a, state_b = state_b, state_a
+        # the robot's wrench acts at the grasp; body_f takes it about the COM
+        body_f[body] = np.concatenate([f, t_grasp + np.cross(p_grasp - p_com, f)])
+        if effect is not None:
+            body_f[body] += effect.body_wrench(v_com, omega)
+        state_a.body_f.assign(body_f)
+        solver.step(state_a, state_b, control, None, sim_dt)
+        state_a, state_b = state_b, state_a
     body_q_substeps[-1] = state_a.body_q.numpy()[body]
 
     R_obj = Rotation.from_quat(body_q_substeps[:, 3:7])

@@ -7,7 +7,8 @@ physics. The wrench it applies at the handle is the controller's joint effort
 turned into a handle force, plus a slowly varying push against the joint's
 constraint directions (which the joint absorbs, as a real hand's does). The
 handle frame is the tracked frame. Coulomb joint friction, -f_c tanh(qd / eps),
-goes in through `joint_f` (`apply_joint_coulomb_friction`): Featherstone does
+and any concealed passive force (damping, spring, Stribeck breakaway) go in
+through `joint_f` (`apply_joint_effort_and_passive_forces`): Featherstone does
 not apply `joint_friction`.
 """
 
@@ -137,17 +138,57 @@ class JointedMotion:
     qd: np.ndarray
 
 
+JOINT_EFFECT_SIZE = 5
+"""Passive joint forces beyond the Coulomb friction, per world: damping b [N s/m or N m s/rad], stiffness k
+[N/m or N m/rad], spring force k q0 [N or N m], Stribeck excess f_s - f_c [N or N m], Stribeck speed v_s
+[m/s or rad/s]."""
+
+
+@wp.func
+def passive_joint_force(q: float, qd: float, friction: float, smoothing: float, effect: wp.array2d[float],
+                        w: int) -> float:
+    """-(f_c + (f_s - f_c) exp(-(qd / v_s)^2)) tanh(qd / eps) - b qd - k (q - q0) [N or N m]."""
+    stribeck = float(0.0)
+    if effect[w, 3] != 0.0:
+        x = qd / effect[w, 4]
+        stribeck = effect[w, 3] * wp.exp(-x * x)
+    return -(friction + stribeck) * wp.tanh(qd / smoothing) - effect[w, 0] * qd - effect[w, 1] * q + effect[w, 2]
+
+
 @wp.kernel
-def apply_joint_coulomb_friction(
+def apply_joint_effort_and_passive_forces(
     joint_effort: wp.array[float],
+    joint_q: wp.array[float],
     joint_qd: wp.array[float],
     friction: wp.array[float],
     smoothing: float,
+    effect: wp.array2d[float],
     joint_f: wp.array[float],
 ):
-    """Generalized force [N or N m] = commanded effort - f_c tanh(qd / eps), per world's one joint."""
+    """Generalized force [N or N m] = commanded effort + the joint's passive forces, per world's one joint."""
     w = wp.tid()
-    joint_f[w] = joint_effort[w] - friction[w] * wp.tanh(joint_qd[w] / smoothing)
+    joint_f[w] = joint_effort[w] + passive_joint_force(joint_q[w], joint_qd[w], friction[w], smoothing, effect, w)
+
+
+def joint_effect_vector(effect, friction: float) -> np.ndarray:
+    """The [JOINT_EFFECT_SIZE] passive-force vector of a ConcealedEffect (None: zeros) on a joint whose
+    Coulomb friction is `friction`."""
+    out = np.zeros(JOINT_EFFECT_SIZE)
+    out[4] = 1.0
+    if effect is None:
+        return out
+    p = effect.params
+    if effect.name == "viscous_damping":
+        out[0] = p["b"]
+    elif effect.name == "spring":
+        out[1], out[2] = p["k"], p["k"] * p["q0"]
+    elif effect.name == "stribeck_friction":
+        if abs(p["f_c"] - friction) > 1e-12:
+            raise ValueError(f"stribeck_friction f_c {p['f_c']} must be the joint's Coulomb friction {friction}")
+        out[3], out[4] = p["f_s"] - p["f_c"], p["v_s"]
+    else:
+        raise ValueError(f"{effect.name}: not an effect of a joint (viscous_damping, spring, stribeck_friction)")
+    return out
 
 
 def add_jointed_part(builder, joint_type: str, axis, origin, placement: Pose, inertial: Inertial) -> int:
@@ -208,8 +249,12 @@ def _smooth_noise(rng: np.random.Generator, dims: int, duration_s: float):
 
 
 def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.random.Generator,
-                     device: str = "cpu") -> JointedMotion:
-    """Simulate the part on its joint in Newton (Featherstone, no damping) under the controller."""
+                     device: str = "cpu", effect=None) -> JointedMotion:
+    """Simulate the part on its joint in Newton (Featherstone, no damping) under the controller.
+
+    effect: a ConcealedEffect on the joint (viscous_damping, spring, stribeck_friction) the controller
+    does not know of, added to the joint's passive forces.
+    """
     import newton
 
     inertial = obj.inertial()
@@ -224,6 +269,8 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
     control = model.control()
     effort = wp.zeros(1, dtype=float, device=device)
     friction = wp.array([obj.friction], dtype=float, device=device)
+    passive = wp.array(joint_effect_vector(effect, obj.friction)[None].astype(np.float32), dtype=float,
+                       device=device)
 
     reference = _reference(obj, config, rng)
     constraint = _smooth_noise(rng, 6, config.duration_s)
@@ -283,7 +330,8 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
             body_q[i] = state_a.body_q.numpy()[body]
             q_log[i] = state_a.joint_q.numpy()[0]
             qd_log[i] = state_a.joint_qd.numpy()[0]
-            wp.launch(apply_joint_coulomb_friction, dim=1, inputs=[effort, state_a.joint_qd, friction, eps],
+            wp.launch(apply_joint_effort_and_passive_forces, dim=1,
+                      inputs=[effort, state_a.joint_q, state_a.joint_qd, friction, eps, passive],
                       outputs=[control.joint_f], device=device)
             solver.step(state_a, state_b, control, None, sim_dt)
             state_a, state_b = state_b, state_a

@@ -120,6 +120,9 @@ class JointedSampleConfig:
     noise: SensorNoise = field(default_factory=SensorNoise)
     render: RenderConfig = field(default_factory=RenderConfig)
     seed: int = 0
+    effect: ConcealedEffect | None = None
+    """A passive joint force (viscous_damping, spring, stribeck_friction) hidden in both recordings;
+    recorded in truth.json."""
 
 
 def make_jointed_sample(out_dir: Path, config: JointedSampleConfig = JointedSampleConfig()) -> Path:
@@ -139,7 +142,8 @@ def make_jointed_sample(out_dir: Path, config: JointedSampleConfig = JointedSamp
     mesh_world.export(out_dir / "part.obj")
     recordings = {}
     for name in ("trial", "heldout"):
-        motion = simulate_jointed(obj, JointedMotionConfig(duration_s=config.motion_duration_s), rng)
+        motion = simulate_jointed(obj, JointedMotionConfig(duration_s=config.motion_duration_s), rng,
+                                  effect=config.effect)
         recordings[name] = write_jointed_recording(out_dir / f"{name}.mcap", obj, motion, config.noise, rng).name
     truth = obj.inertial()
     doc = {
@@ -149,6 +153,7 @@ def make_jointed_sample(out_dir: Path, config: JointedSampleConfig = JointedSamp
         "joint": {"type": obj.joint_type, "axis": list(obj.axis), "origin": list(obj.origin_m),
                   "friction": obj.friction, "travel": list(obj.travel)},
         "recordings": recordings,
+        "effect": {"name": config.effect.name, "params": config.effect.params} if config.effect else None,
         "config": _jsonable(asdict(config)),
     }
     (out_dir / "truth.json").write_text(json.dumps(doc, indent=2) + "\n")

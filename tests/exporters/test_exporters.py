@@ -203,6 +203,34 @@ def test_jointed_asset_reads_back_with_its_joint(asset: Asset, tmp_path: Path, j
     assert upper == pytest.approx(np.degrees(0.9) if joint_type == "revolute" else 0.9, rel=1e-6)
 
 
+@pytest.mark.parametrize("joint_type", ["prismatic", "revolute"])
+def test_joint_damping_and_spring_reach_every_format(asset: Asset, tmp_path: Path, joint_type: str):
+    """A diagnosed joint damping and spring (stiffness about a rest position) come back from MuJoCo's MJCF
+    model, the URDF's <dynamics> and Gazebo spring tags, and the USD joint's newton:/mjc: attributes."""
+    import mujoco
+    import yourdfpy
+    from pxr import Usd
+
+    joint = Joint(joint_type, (0.0, 0.0, 1.0), (0.35, -0.12, 0.02), -0.05, 0.9, damping=0.03, stiffness=0.4,
+                  spring_ref=0.2)
+    paths = export_all(replace(asset, kind=joint_type, joint=joint), tmp_path)
+    model = mujoco.MjModel.from_xml_path(str(paths.mjcf))
+    assert model.dof_damping[0] == pytest.approx(0.03)
+    assert model.jnt_stiffness[0] == pytest.approx(0.4)
+    assert model.qpos_spring[0] == pytest.approx(0.2)
+    urdf_joint = yourdfpy.URDF.load(str(paths.urdf), load_meshes=False).joint_map["box_joint"]
+    assert float(urdf_joint.dynamics.damping) == pytest.approx(0.03)
+    gazebo = ET.parse(paths.urdf).getroot().find("gazebo[@reference='box_joint']")
+    assert float(gazebo.find("springStiffness").text) == pytest.approx(0.4)
+    assert float(gazebo.find("springReference").text) == pytest.approx(0.2)
+    stage = Usd.Stage.Open(str(paths.usd))
+    prim = stage.GetPrimAtPath("/box/joint")
+    per_unit = np.pi / 180 if joint_type == "revolute" else 1.0
+    assert prim.GetAttribute("newton:damping").Get() == pytest.approx(0.03 * per_unit)
+    assert prim.GetAttribute("mjc:stiffness").Get() == pytest.approx(0.4)
+    assert prim.GetAttribute("mjc:springref").Get() == pytest.approx(0.2 / per_unit)
+
+
 def test_empty_joint_range_is_refused(asset: Asset, tmp_path: Path):
     """A joint whose lower limit is not below its upper one is refused by every writer, naming the range."""
     drawer = replace(asset, kind="prismatic", joint=Joint("prismatic", (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3, 0.3))

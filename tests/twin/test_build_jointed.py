@@ -13,7 +13,8 @@ SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "drawer"
 @pytest.mark.skipif(not (SAMPLE / "trial.mcap").is_file(), reason="samples/drawer not present")
 def test_build_drawer_sample(tmp_path: Path):
     """The drawer's mass and joint friction are measured, its COM and inertia marked prior with intervals that
-    hold the truth, the joint's range covers the travel, and MuJoCo replays the held-out trial."""
+    hold the truth, the joint's range covers the travel, MuJoCo replays the held-out trial, and the clean
+    drawer's diagnosis reports no effect."""
     truth = json.loads((SAMPLE / "truth.json").read_text())
     out = tmp_path / "out"
     base = tmp_path / "cabinet.obj"
@@ -41,6 +42,7 @@ def test_build_drawer_sample(tmp_path: Path):
     assert len(doc["provenance"]["validation"]) == 5
     replay = doc["provenance"]["heldout_replay"]
     assert replay["mujoco"]["rmse_position_m"] < 0.005 and replay["newton"]["rmse_position_m"] < 0.005
+    assert doc["effects"] == [] and "screening" in doc["provenance"]["diagnose"]
     for key in ("urdf", "mjcf", "usd", "report"):
         assert (out / doc["files"][key]).is_file()
     assert (out / "meshes" / "base.obj").is_file()

@@ -1,11 +1,17 @@
 """`twin bench diagnose`: recordings with a concealed effect (or none), shuffled; is the right one found?
 
-Each case is a held cube or sphere moved by the simulated robot (Newton), with
-one effect of a random magnitude hidden in the trial and held-out recordings
-alike, or none. The magnitude is drawn log-uniformly as a multiple of the
-sensor's noise (per-sample force or torque for bias, damping and drag; about
-a millisecond per unit for delay; a millimetre per unit for the COM shift), from
-barely above it to large. The diagnosis is told nothing of it.
+Each case is a held cube or sphere moved by the simulated robot (Newton), or
+RigPI's drawer, cabinet door or oven door worked on its joint (Featherstone),
+with one effect of a random magnitude hidden in the trial and held-out
+recordings alike, or none. The magnitude is drawn log-uniformly as a multiple
+("ratio") of the sensor's noise, from barely above it to large: per-sample
+force or torque for bias, damping and drag; 2 ms per unit for delay; a
+millimetre per unit for the COM shift. On a joint the unit is the per-sample
+joint effort noise sigma (the force noise, times the handle's lever on a
+hinge): damping b = ratio sigma / v, v = 0.8 travel/s a typical joint speed;
+spring k = ratio sigma / (travel / 4) about a rest position inside the travel;
+Stribeck excess f_s - f_c = 5 ratio sigma (it acts only near reversals), v_s
+5-20 % of v. The diagnosis is told nothing of it.
 """
 
 from __future__ import annotations
@@ -18,6 +24,11 @@ from pathlib import Path
 import numpy as np
 
 EFFECTS = ("sensor_bias", "time_delay", "viscous_damping", "quadratic_drag", "nonuniform_density")
+JOINT_EFFECTS = ("viscous_damping", "spring", "stribeck_friction")
+FREE_OBJECTS = ("cube", "sphere")
+JOINT_OBJECTS = ("drawer", "cabinet_door", "oven_door")
+JOINT_DURATION_S = 4.0
+"""Length of each jointed recording [s]: a few reversals after the hold and the fade-in."""
 RATIO_RANGE = (0.5, 8.0)
 """Effect size as a multiple of the per-sample sensor noise (see `concealed_effect`)."""
 SPEED_M_S = 0.15
@@ -28,7 +39,8 @@ TURN_RAD_S = 2.0
 
 @dataclass(frozen=True)
 class Case:
-    """One recording pair: object, concealed effect (None: clean), its size ratio and seed."""
+    """One recording pair: object (a FREE_OBJECTS shape or a JOINT_OBJECTS part), concealed effect
+    (None: clean), its size ratio and seed."""
 
     shape: str
     effect: object
@@ -54,22 +66,60 @@ def concealed_effect(name: str, ratio: float, rng: np.random.Generator, noise):
                                       "b_angular": ratio * noise.torque_sigma_nm / TURN_RAD_S})
     if name == "quadratic_drag":
         return ConcealedEffect(name, {"c": ratio * noise.force_sigma_n / SPEED_M_S**2})
-    return ConcealedEffect(name, {"com_shift": (ratio * 1e-3 * direction).tolist()})
+    if name == "nonuniform_density":
+        return ConcealedEffect(name, {"com_shift": (ratio * 1e-3 * direction).tolist()})
+    raise ValueError(f"{name}: not an effect of a held body ({', '.join(EFFECTS)}); joint effects need --object")
+
+
+def joint_effort_noise(obj, noise) -> float:
+    """Per-sample noise of the joint effort [N or N m]: the force noise, times the handle's lever on a hinge."""
+    if obj.joint_type == "prismatic":
+        return noise.force_sigma_n
+    handle = np.asarray(obj.position_m) + np.asarray(obj.handle_m) - np.asarray(obj.origin_m)
+    return noise.force_sigma_n * float(np.linalg.norm(np.cross(obj.axis, handle)))
+
+
+def concealed_joint_effect(name: str, ratio: float, rng: np.random.Generator, obj, noise):
+    """A ConcealedEffect of `name` on `obj`'s joint whose size is `ratio` times its effort noise (see module
+    docstring)."""
+    from pipelines.synth.held import ConcealedEffect
+
+    sigma = joint_effort_noise(obj, noise)
+    travel = obj.travel[1] - obj.travel[0]
+    speed = 0.8 * travel
+    if name == "viscous_damping":
+        return ConcealedEffect(name, {"b": ratio * sigma / speed})
+    if name == "spring":
+        return ConcealedEffect(name, {"k": ratio * sigma / (travel / 4), "q0": float(rng.uniform(*obj.travel))})
+    if name == "stribeck_friction":
+        return ConcealedEffect(name, {"f_s": obj.friction + 5 * ratio * sigma, "f_c": obj.friction,
+                                      "v_s": float(speed * np.exp(rng.uniform(np.log(0.05), np.log(0.2))))})
+    raise ValueError(f"{name}: not a joint effect ({', '.join(JOINT_EFFECTS)})")
 
 
 def make_cases(concealed: int, clean: int, seed: int) -> list[Case]:
-    """`concealed` cases cycling through every effect, `clean` without, shuffled."""
+    """`concealed` cases cycling through every effect on free and jointed objects, `clean` without
+    (alternately free and jointed), shuffled."""
     from pipelines.synth.held import SensorNoise
+    from pipelines.synth.jointed import jointed_paper_objects
 
+    parts = jointed_paper_objects()
+    kinds = [(name, False) for name in EFFECTS] + [(name, True) for name in JOINT_EFFECTS]
     rng = np.random.default_rng(seed)
     cases = []
     for k in range(concealed):
-        name = EFFECTS[k % len(EFFECTS)]
+        name, jointed = kinds[k % len(kinds)]
         lo, hi = (1.5, 10.0) if name == "nonuniform_density" else RATIO_RANGE
         ratio = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
-        cases.append(Case(("cube", "sphere")[k % 2], concealed_effect(name, ratio, rng, SensorNoise()), ratio,
-                          int(rng.integers(1 << 30))))
-    cases += [Case(("cube", "sphere")[k % 2], None, 0.0, int(rng.integers(1 << 30))) for k in range(clean)]
+        if jointed:
+            part = JOINT_OBJECTS[(k // len(kinds)) % len(JOINT_OBJECTS)]
+            effect = concealed_joint_effect(name, ratio, rng, parts[part], SensorNoise())
+        else:
+            part = FREE_OBJECTS[(k // len(kinds)) % len(FREE_OBJECTS)]
+            effect = concealed_effect(name, ratio, rng, SensorNoise())
+        cases.append(Case(part, effect, ratio, int(rng.integers(1 << 30))))
+    cases += [Case((FREE_OBJECTS[(k // 2) % 2] if k % 2 == 0 else JOINT_OBJECTS[(k // 2) % 3]), None, 0.0,
+                   int(rng.integers(1 << 30))) for k in range(clean)]
     rng.shuffle(cases)
     return cases
 
@@ -108,45 +158,80 @@ def record_case(case: Case, directory: Path, duration_s: float):
     return out[0], out[1], uniform, grasp.inverse()
 
 
+def record_joint_case(case: Case, directory: Path, duration_s: float = JOINT_DURATION_S):
+    """Simulate the jointed case's trial and held-out recordings into `directory`; returns (trial, holdout,
+    joint, placement, prior) as `diagnose_jointed` takes them (the joint as `detect_kind` finds it)."""
+    from assets.materials import material_range
+    from pipelines.identify.kind import detect_kind
+    from pipelines.logs import read_recording
+    from pipelines.priors import uniform_density_prior
+    from pipelines.synth.held import SensorNoise
+    from pipelines.synth.jointed import (
+        JointedMotionConfig, jointed_paper_objects, simulate_jointed, write_jointed_recording,
+    )
+
+    obj = jointed_paper_objects()[case.shape]
+    rng = np.random.default_rng(case.seed)
+    out = []
+    for name in ("trial", "heldout"):
+        motion = simulate_jointed(obj, JointedMotionConfig(duration_s=duration_s), rng, effect=case.effect)
+        out.append(read_recording(write_jointed_recording(directory / f"{name}.mcap", obj, motion, SensorNoise(),
+                                                          rng)))
+    joint = detect_kind(out[0]).joint
+    prior = uniform_density_prior(obj.mesh(), material_range(None)).inertial
+    return out[0], out[1], joint, obj.placement(), prior
+
+
 def truth_magnitude(effect) -> float:
+    """The size of a concealed effect by the parameter its diagnosis is scored on (joint Stribeck: f_s - f_c)."""
     from pipelines.diagnose import main_magnitude
 
     params = effect.params
     if effect.name == "time_delay":
         return abs(params["seconds"])
+    if effect.name == "spring":
+        return params["k"]
+    if effect.name == "stribeck_friction":
+        return params["f_s"] - params["f_c"]
+    if effect.name == "viscous_damping" and "b_angular" not in params:
+        return params["b"]
     return main_magnitude(effect.name, params)
 
 
 def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0, seed: int = 0,
                    bootstraps: int = 40) -> list[dict]:
     """Run every case, print the table and the summary; returns the rows."""
-    from pipelines.diagnose import DiagnoseConfig, diagnose_held, main_magnitude
+    from pipelines.diagnose import DiagnoseConfig, diagnose_held, diagnose_jointed
 
     rows = []
-    header = (f"{'#':>3} {'concealed':<18} {'ratio':>6} {'found (top-1)':<18} {'main err %':>10} "
+    header = (f"{'#':>3} {'object':<12} {'concealed':<18} {'ratio':>6} {'found (top-1)':<18} {'main err %':>10} "
               f"{'rmse before mm':>14} {'after mm':>9} {'s':>5}")
     print(header)
     print("-" * len(header))
     for k, case in enumerate(make_cases(concealed, clean, seed)):
         t0 = time.perf_counter()
+        config = DiagnoseConfig(bootstraps=bootstraps, seed=case.seed)
         with tempfile.TemporaryDirectory() as tmp:
-            trial, holdout, prior, X_tracked_body = record_case(case, Path(tmp), duration_s)
-        diagnosis = diagnose_held([trial], holdout, X_tracked_body, prior,
-                                  DiagnoseConfig(bootstraps=bootstraps, seed=case.seed))
+            if case.shape in JOINT_OBJECTS:
+                trial, holdout, joint, placement, prior = record_joint_case(case, Path(tmp))
+                diagnosis, _ = diagnose_jointed([trial], holdout, joint, placement, prior, config=config)
+            else:
+                trial, holdout, prior, X_tracked_body = record_case(case, Path(tmp), duration_s)
+                diagnosis = diagnose_held([trial], holdout, X_tracked_body, prior, config)
         top = diagnosis.effects[0] if diagnosis.effects else None
         truth = case.effect.name if case.effect else None
         error = None
         if top is not None and case.effect is not None and top.name == truth:
             # a delay of the wrong sign counts as an error of more than 100 %
             found = (top.params["seconds"] * np.sign(case.effect.params["seconds"]) if truth == "time_delay"
-                     else main_magnitude(top.name, top.params))
+                     else truth_magnitude(replace(case.effect, params=top.params)))
             error = 100 * abs(found - truth_magnitude(case.effect)) / truth_magnitude(case.effect)
-        row = {"concealed": truth, "ratio": case.ratio, "found": top.name if top else None,
+        row = {"object": case.shape, "concealed": truth, "ratio": case.ratio, "found": top.name if top else None,
                "all_found": [e.name for e in diagnosis.effects], "main_error_pct": error,
                "rmse_before_m": diagnosis.fits["before"].rmse_position_m,
                "rmse_after_m": diagnosis.fits["after"].rmse_position_m, "seconds": time.perf_counter() - t0}
         rows.append(row)
-        print(f"{k:>3} {truth or 'none':<18} {case.ratio:>6.2f} {row['found'] or 'none':<18} "
+        print(f"{k:>3} {case.shape:<12} {truth or 'none':<18} {case.ratio:>6.2f} {row['found'] or 'none':<18} "
               f"{'' if error is None else f'{error:.1f}':>10} {1000 * row['rmse_before_m']:>14.3f} "
               f"{1000 * row['rmse_after_m']:>9.3f} {row['seconds']:>5.1f}", flush=True)
     _summary(rows)
@@ -162,12 +247,16 @@ def _summary(rows: list[dict]) -> None:
     halved = [r for r in reported if r["rmse_after_m"] <= 0.5 * r["rmse_before_m"]]
     print()
     print(f"top-1 right: {len(right)}/{len(concealed)} concealed ({100 * len(right) / max(len(concealed), 1):.0f} %)")
-    for name in EFFECTS:
-        of = [r for r in concealed if r["concealed"] == name]
-        ok = [r for r in of if r["found"] == name]
-        errs = [r["main_error_pct"] for r in ok]
-        print(f"  {name:<18} {len(ok)}/{len(of)} right, main parameter error median "
-              f"{np.median(errs) if errs else float('nan'):.1f} %, max {max(errs) if errs else float('nan'):.1f} %")
+    for where, objects, names in (("free", FREE_OBJECTS, EFFECTS), ("joint", JOINT_OBJECTS, JOINT_EFFECTS)):
+        for name in names:
+            of = [r for r in concealed if r["concealed"] == name and r["object"] in objects]
+            ok = [r for r in of if r["found"] == name]
+            errs = [r["main_error_pct"] for r in ok]
+            print(f"  {where:<5} {name:<18} {len(ok)}/{len(of)} right, main parameter error median "
+                  f"{np.median(errs) if errs else float('nan'):.1f} %, max {max(errs) if errs else float('nan'):.1f} %")
+    for where, objects in (("free", FREE_OBJECTS), ("joint", JOINT_OBJECTS)):
+        of = [r for r in clean if r["object"] in objects]
+        print(f"nothing reported on clean ({where}): {len(of) - sum(bool(r['found']) for r in of)}/{len(of)}")
     print(f"nothing reported on clean: {len(clean) - sum(bool(r['found']) for r in clean)}/{len(clean)}")
     print(f"main parameter within 15 %: {len(within)}/{len(right)} of the right ones")
     print(f"held-out position RMSE at least halved: {len(halved)}/{len(reported)} where an effect is reported")

@@ -1,0 +1,235 @@
+"""Diagnose a part on a joint (drawer, door): which passive joint force does the identified model lack?
+
+The jointed base model is M q'' = tau + Q_g(q) - f_c tanh(q'/eps): its Coulomb
+friction is always fitted (`theta.friction`), so `coulomb_friction` is no
+candidate here (DESIGN.md). The candidates are passive joint forces the base
+lacks, each a term of the joint's generalized force in the Featherstone
+rollout (`passive_joint_force`, through `joint_f`):
+
+  viscous_damping:   -b q'
+  spring:            -k (q - q0)            (door closers, soft-close drawers)
+  stribeck_friction: -(f_s - f_c) exp(-(q'/v_s)^2) tanh(q'/eps), breakaway above f_c
+
+Screening regresses the joint effort on the base columns plus every candidate's
+(the Stribeck speed searched on a grid) with backward elimination under the BIC
+and bootstrap inclusion probabilities. Effort regression is weak evidence here:
+q'' from tracked poses carries noise far above the F/T sensor's. So every
+candidate, alone, is refitted with the body in Newton (`identify_jointed(...,
+effects=...)`) and replayed on held-out data in windows from measured starts;
+a candidate is chosen when it predicts the windows significantly better than
+the base model, the pair of the two best when it beats the better of them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from assets import Effect, FitMetrics
+from pipelines.identify.jointed import (
+    JOINT_EFFECT_PARAMS, STRIBECK_SPEEDS, JointedConfig, equation_of_motion_rows, identify_jointed, joint_body,
+    joint_effect_columns, replay_jointed,
+)
+
+from .residuals import analyse_joint_residual, describe
+from .screening import Library, fit_subset, screen
+from .select import DiagnoseConfig, Diagnosis
+
+JOINT_CANDIDATES = tuple(JOINT_EFFECT_PARAMS)
+"""Joint candidates in screening order."""
+
+
+def joint_effect_params(name: str, identified) -> dict:
+    """The DESIGN.md parameters of effect `name` from an identification that fitted it."""
+    if name == "viscous_damping":
+        return {"b": identified.value("damping")}
+    if name == "spring":
+        k = identified.value("stiffness")
+        return {"k": k, "q0": identified.value("spring_force") / k if k != 0 else 0.0}
+    f_c = identified.value("friction")
+    return {"f_s": f_c + identified.value("stribeck"), "f_c": f_c, "v_s": identified.value("stribeck_speed")}
+
+
+def _library(rows: list[dict], config: JointedConfig, stribeck_speed: float, noise: float) -> Library:
+    """Base columns and every candidate's, thinned to the low-pass filter's Nyquist rate, in noise units."""
+    Xs, ys, samples, offset, stride = [], [], [], 0, 1
+    groups: dict[str, tuple[int, int]] = {}
+    for r in rows:
+        stride = max(1, int(r["rate_hz"] / (2 * config.smoothing_hz)))
+        keep = np.arange(0, len(r["t_s"]), stride)
+        cols = [r["columns"][keep]]
+        start = r["columns"].shape[1]
+        for name in JOINT_CANDIDATES:
+            c = joint_effect_columns(name, r, config, stribeck_speed)[keep]
+            groups[name] = (start, start + c.shape[1])
+            start += c.shape[1]
+            cols.append(c)
+        Xs.append(np.concatenate(cols, 1) / noise)
+        ys.append(r["tau"][keep] / noise)
+        samples.append(keep + offset)
+        offset += len(r["t_s"])
+    return Library(np.vstack(Xs), np.concatenate(ys), groups, np.concatenate(samples), stride,
+                   rows[0]["columns"].shape[1])
+
+
+def _columns(lib: Library, names) -> np.ndarray:
+    return lib.X[:, list(range(lib.base)) + [c for n in names for c in range(*lib.groups[n])]]
+
+
+def _stribeck_speed(rows: list[dict], config: JointedConfig) -> float:
+    """The v_s [m/s or rad/s] on the grid at which the full candidate library fits the trials best."""
+    def rss(v_s):
+        return fit_subset(_library(rows, config, v_s, 1.0), JOINT_CANDIDATES)[1]
+    return float(min(STRIBECK_SPEEDS, key=rss))
+
+
+def _time_blocks(recording, blocks: int = 2) -> list:
+    """`recording` cut into `blocks` consecutive parts of equal duration (each a Recording)."""
+    from dataclasses import replace
+
+    t0 = min(recording.pose.t_s[0], recording.wrench.t_s[0])
+    edges = t0 + recording.duration_s * np.arange(blocks + 1) / blocks
+
+    def cut(track, a, b, fields):
+        if track is None:
+            return None
+        keep = (track.t_s >= a) & (track.t_s <= b)
+        return replace(track, t_s=track.t_s[keep],
+                       **{f: getattr(track, f)[keep] for f in fields if getattr(track, f) is not None})
+
+    return [replace(recording, pose=cut(recording.pose, a, b, ("position", "quat_xyzw")),
+                    wrench=cut(recording.wrench, a, b, ("force", "torque")),
+                    wrench_raw=cut(recording.wrench_raw, a, b, ("force", "torque")),
+                    contact=cut(recording.contact, a, b, ("position",)),
+                    joints=cut(recording.joints, a, b, ("position", "velocity")), duration_s=float(b - a))
+            for a, b in zip(edges[:-1], edges[1:])]
+
+
+def _better(mse: np.ndarray, reference: np.ndarray) -> bool:
+    """Whether per-window errors `mse` beat `reference`'s by more than twice the standard error of the paired
+    difference (windows are nearly independent), the rule the identification keeps its Newton fit by. The
+    difference is of log errors: one window that diverges must not outweigh all the others."""
+    d = np.log(np.maximum(mse, 1e-300)) - np.log(np.maximum(reference, 1e-300))
+    return bool(d.mean() + 2 * d.std(ddof=1) / np.sqrt(len(d)) < 0)
+
+
+def _metrics(joint_type: str, replay: dict) -> FitMetrics:
+    return FitMetrics(replay["rmse_position_m"], replay["rmse_q"] if joint_type == "revolute" else 0.0,
+                      replay["rmse_q"])
+
+
+def _window_mse(q_sim: np.ndarray, windows) -> np.ndarray:
+    """Mean squared q error [m^2 or rad^2] per replayed window."""
+    return np.mean((q_sim - windows.q[1:]) ** 2, axis=0)
+
+
+def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: JointedConfig = JointedConfig(),
+                     config: DiagnoseConfig = DiagnoseConfig()):
+    """Diagnose a part on `joint` from `trials`; `holdout` (a Recording or None) chooses and validates.
+
+    prior: the part's prior body (object frame). Every candidate set is refitted with the body in Newton on
+    the training recordings and replayed, in windows from measured starts, on the evaluation recording
+    (the held-out one; without it, each half of the trial fitted on the other). A candidate is kept when
+    it predicts the windows significantly better than the base model (`_better`), a pair when it beats
+    its better member too.
+
+    Returns (Diagnosis, the identification on all trials with the chosen effects, or None if none is chosen).
+    """
+    rng = np.random.default_rng(config.seed)
+    body = joint_body(joint, placement, prior, jconfig)
+    rows = [equation_of_motion_rows(r, joint, body, jconfig) for r in trials]
+    v_s = _stribeck_speed(rows, jconfig)
+    full = _library(rows, jconfig, v_s, 1.0)
+    _, rss, n = fit_subset(full, JOINT_CANDIDATES)
+    noise = float(np.sqrt(rss / max(n - full.X.shape[1], 1)))
+    lib = _library(rows, jconfig, v_s, noise)
+    screening = screen(lib, rng, config.bootstraps)
+
+    if holdout is not None:
+        folds = [(trials, holdout)]
+    else:
+        halves = [_time_blocks(r) for r in trials]
+        first, second = [h[0] for h in halves], [h[1] for h in halves]
+        folds = [(first, r) for r in second] + [(second, r) for r in first]
+    refits: dict[tuple, dict] = {}
+
+    def evaluate(names: tuple) -> dict:
+        """Newton refit of the body with `names` on each fold's training part, replayed on its evaluation part."""
+        if names not in refits:
+            mse, replays = [], []
+            for train, test in folds:
+                ident = identify_jointed(list(train), joint, placement, prior, None, jconfig, effects=names)
+                b = joint_body(joint, placement, prior, jconfig, names)
+                replay, q_sim, w = replay_jointed(test, joint, placement, prior, b, ident.values, jconfig)
+                mse.append(_window_mse(q_sim, w))
+                replays.append((replay, q_sim, w, ident))
+            refits[names] = {"mse": np.concatenate(mse), "replays": replays}
+        return refits[names]
+
+    base = evaluate(())
+    passing = sorted((c for c in JOINT_CANDIDATES if _better(evaluate((c,))["mse"], base["mse"])),
+                     key=lambda c: refits[(c,)]["mse"].sum())
+    best: tuple = (passing[0],) if passing else ()
+    if len(passing) >= 2:
+        pair = tuple(c for c in JOINT_CANDIDATES if c in passing[:2])
+        if _better(evaluate(pair)["mse"], refits[best]["mse"]):
+            best = pair
+    scores = {"+".join(k) or "none": float(v["mse"].mean()) for k, v in refits.items()}
+
+    evaluation = holdout if holdout is not None else trials[0]
+    if holdout is not None:
+        before_replay, q_before, windows, base_fit = refits[()]["replays"][0]
+        after_replay, q_after, _, final = refits[best]["replays"][0]
+    else:  # the reported replay: the trial, by models fitted on all of it
+        def fitted(names):
+            ident = identify_jointed(trials, joint, placement, prior, None, jconfig, effects=names)
+            b = joint_body(joint, placement, prior, jconfig, names)
+            return (*replay_jointed(evaluation, joint, placement, prior, b, ident.values, jconfig), ident)
+
+        before_replay, q_before, windows, base_fit = fitted(())
+        after_replay, q_after, _, final = fitted(best) if best else (before_replay, q_before, windows, base_fit)
+
+    effects = []
+    for name in sorted(best, key=lambda c: refits[(c,)]["mse"].sum()):
+        effects.append(Effect(name, joint_effect_params(name, final), {
+            "inclusion_probability": screening.inclusion[name], "belongs": "object",
+            "heldout_mse_q": {"none": scores["none"], name: scores[name], "chosen": scores["+".join(best)]},
+            "std": {p: final.std(p) for p in JOINT_EFFECT_PARAMS[name]},
+            "heldout_rmse_position_before_m": before_replay["rmse_position_m"],
+            "heldout_rmse_position_after_m": after_replay["rmse_position_m"],
+        }))
+
+    eval_rows = equation_of_motion_rows(evaluation, joint, body, jconfig)
+    stride = lib.stride
+
+    def residual(names):
+        """Effort residual [noise units] of the least-squares model with `names` on the evaluation rows."""
+        coef, *_ = np.linalg.lstsq(_columns(lib, names), lib.y, rcond=None)
+        X = np.concatenate([eval_rows["columns"]] + [joint_effect_columns(c, eval_rows, jconfig, v_s) for c in names],
+                           1) / noise
+        return eval_rows["tau"] / noise - X @ coef
+
+    unit = "m/s" if joint.type == "prismatic" else "rad/s"
+    analyse = lambda r: analyse_joint_residual(eval_rows["t_s"], eval_rows["q"], eval_rows["qd"],  # noqa: E731
+                                               eval_rows["tau"], r, stride=stride, unit=unit)
+    r_before, r_after = residual(()), residual(best)
+    residuals = {"before": analyse(r_before), "after": analyse(r_after)}
+    after = residuals["after"]
+    unexplained = tuple(
+        {"summary": s["summary"], "where": s["where"], "share": s["share"]}
+        for s in after.localisation
+        if s["share"] >= config.unexplained_share and min(after.whiteness_p) < 1e-6
+    )
+    traces = {"t_s": windows.t_s.reshape(-1).tolist(),
+              "measured_position": joint.tracked_position(windows.q[1:]).reshape(-1, 3).tolist(),
+              "before_position": joint.tracked_position(q_before).reshape(-1, 3).tolist(),
+              "after_position": joint.tracked_position(q_after).reshape(-1, 3).tolist(),
+              "window_s": jconfig.window_s, "residual_t_s": eval_rows["t_s"].tolist(),
+              "residual_before": r_before[:, None].tolist(), "residual_after": r_after[:, None].tolist()}
+    diagnosis = Diagnosis(
+        effects=tuple(effects), unexplained=unexplained, screening=screening, scores=scores,
+        fits={"before": _metrics(joint.type, before_replay), "after": _metrics(joint.type, after_replay)},
+        residuals=residuals, findings=tuple(describe(residuals["before"])),
+        inertial={"before": base_fit.inertial, "after": final.inertial},
+        heldout=holdout is not None, traces=traces,
+    )
+    return diagnosis, final if best else None
