@@ -17,6 +17,9 @@ class Build:
 
     source: tyro.conf.Positional[Path]
     """Scan directory (nerfstudio layout) or mesh file (.obj .stl .ply .glb, metres, world frame)."""
+    scan: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
+    """Another scan session of the same object in another resting pose (turned over, on its side), merged with
+    SOURCE's to see what one session cannot (under raised parts); repeat for more. SOURCE sets the placement."""
     logs: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
     """MCAP recording of an interaction; repeat for several trials."""
     holdout: Path | None = None
@@ -160,7 +163,7 @@ def _run_build(args: Build) -> None:
 
     build(
         BuildConfig(
-            source=args.source, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
+            source=args.source, scans=args.scan, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
             name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
             optimizer=args.optimizer,
             vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind, base_mesh=args.base_mesh,
