@@ -21,8 +21,11 @@ Method:
    sessions saw little surface in common (a flat tool turned over shares only
    its rim). Starts: the four proper alignments of the solids' principal axes,
    plus seeded random rotations when two principal moments are close; each
-   refined briefly by robust least squares (scipy) on a subsample, the best
-   one refined on more points.
+   refined briefly (Levenberg-Marquardt, soft-L1 loss) on a subsample, the
+   best ones refined on more points. When several distinct poses fit about
+   equally well (a symmetric object turned over looks the same either way),
+   every one keeps the object inside both solids, so the one whose
+   intersection is smallest is kept: it carves what either session saw empty.
 4. Check: fitness is the smaller, over the two directions, of the fraction of
    observed points within `inlier_distance_m` of, or inside, the other solid;
    RMSE is over the points where both sessions saw the surface. Fitness below
@@ -79,6 +82,11 @@ class SessionsConfig:
     normal_agreement: float = 0.5
     """Cosine between a point's normal and the other surface's normal above which the point is held on that
     surface (else only inside it): a turned-over tool's underside must not be pulled onto its top."""
+    ambiguity: float = 0.1
+    """Poses whose robust cost is within this fraction of the best are taken as equally supported by the
+    observations (symmetric objects); each is refined and the smallest consistent intersection kept."""
+    max_candidates: int = 6
+    """At most this many such poses are refined and compared."""
     seed: int = 0
     """Seed of the point subsampling and the random starts."""
 
@@ -93,6 +101,8 @@ class Registration:
     overlap: fraction of observed points on surface both sessions observed, 0-1.
     inlier_distance_m: the consistency distance used [m].
     start: which start won ("axes k" or "random k"); starts: how many were tried.
+    consistent_poses: distinct poses within `ambiguity` of the best cost and above `min_fitness`; of several
+      (a symmetric object), the one whose intersection with the first solid is smallest was kept.
     """
 
     T_first_from_session: np.ndarray
@@ -102,6 +112,7 @@ class Registration:
     inlier_distance_m: float
     start: str
     starts: int
+    consistent_poses: int
 
     def to_json(self) -> dict:
         return {
@@ -112,6 +123,7 @@ class Registration:
             "inlier_distance_m": self.inlier_distance_m,
             "start": self.start,
             "starts": self.starts,
+            "consistent_poses": self.consistent_poses,
         }
 
 
@@ -208,31 +220,40 @@ def register_session(
                 np.sort(rng.choice(len(b.points), min(count, len(b.points)), replace=False)))
 
     screen = subsample(config.screen_points)
-    screened = []
-    for label, R0, t0 in starts:
-        R, t, cost = _refine(a, b, R0, t0, *screen, pivot, scale, config.normal_agreement, 30)
-        screened.append((cost, label, R, t))
-    _, label, R, t = min(screened, key=lambda s: s[0])
-    R, t, _ = _refine(a, b, R, t, *subsample(config.points), pivot, scale, config.normal_agreement, 60)
-
-    # consistency, on every observed point
-    r_b, two_b, _ = b.distances_to(a, R, t, np.arange(len(b.points)), config.normal_agreement)
-    r_a, two_a, _ = a.distances_to(b, R.T, -R.T @ t, np.arange(len(a.points)), config.normal_agreement)
-    fitness = min(float(np.mean(r_a <= tau)), float(np.mean(r_b <= tau)))
-    both = np.concatenate([r_a[two_a], r_b[two_b]])
-    both = both[np.abs(both) <= tau]
-    rmse = float(np.sqrt(np.mean(both**2))) if len(both) else float("nan")
-    overlap = float(np.mean(np.concatenate([two_a, two_b])))
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, t
-    registration = Registration(T, fitness, rmse, overlap, float(tau), label, len(starts))
-    if fitness < config.min_fitness:
+    screened = sorted(
+        ((*_refine(a, b, R0, t0, *screen, pivot, scale, config.normal_agreement, 30), label) for label, R0, t0 in starts),
+        key=lambda s: s[2],
+    )
+    # poses the observations hardly tell apart (a symmetric object turned over looks the same either way)
+    candidates = []
+    for R, t, cost, label in screened:
+        if cost > (1 + config.ambiguity) * screened[0][2] or len(candidates) == config.max_candidates:
+            break
+        if all(_angle_deg(R, other[0]) > 5.0 for other in candidates):
+            candidates.append((R, t, label))
+    final = subsample(config.points)
+    refined = [(*_refine(a, b, R, t, *final, pivot, scale, config.normal_agreement, 60), label)
+               for R, t, label in candidates]
+    best_cost = min(r[2] for r in refined)
+    checked = [(_check(a, b, R, t, tau, config.normal_agreement), cost, label) for R, t, cost, label in refined]
+    consistent = [(c, label) for c, cost, label in checked
+                  if cost <= (1 + config.ambiguity) * best_cost and c[0] >= config.min_fitness]
+    if not consistent:
+        fitness = max(c[0][0] for c in checked)
         raise SessionError(
             f"{where}: cannot register this scan session to the first: only {100 * fitness:.0f} % of the observed "
             f"surface lies on or inside the other session's solid (within {1000 * tau:.1f} mm; at least "
             f"{100 * config.min_fitness:.0f} % needed, best of {len(starts)} starts). Is it the same object, "
             "fully in view and segmented?"
         )
+    # every consistent pose keeps the object inside both solids, so the smallest intersection is the
+    # tightest bound: it carves what either session saw empty, wherever the symmetry put it
+    if len(consistent) > 1:
+        volumes = [_intersection_volume(first.mesh, later.mesh, c[3]) for c, _ in consistent]
+        (fitness, rmse, overlap, T), label = consistent[int(np.argmin(volumes))]
+    else:
+        (fitness, rmse, overlap, T), label = consistent[0]
+    registration = Registration(T, fitness, rmse, overlap, float(tau), label, len(starts), len(consistent))
     return registration
 
 
@@ -292,6 +313,30 @@ class _Side:
         residual = np.where(on_surface, signed, np.maximum(signed, 0.0))
         gradient = other.face_normals[face] * (on_surface | (signed > 0))[:, None]
         return residual, on_surface, gradient
+
+
+def _check(a: _Side, b: _Side, R: np.ndarray, t: np.ndarray, tau: float, agreement: float):
+    """(fitness, RMSE [m], overlap, T) of a pose on every observed point (see `Registration`)."""
+    r_b, two_b, _ = b.distances_to(a, R, t, np.arange(len(b.points)), agreement)
+    r_a, two_a, _ = a.distances_to(b, R.T, -R.T @ t, np.arange(len(a.points)), agreement)
+    fitness = min(float(np.mean(r_a <= tau)), float(np.mean(r_b <= tau)))
+    both = np.concatenate([r_a[two_a], r_b[two_b]])
+    both = both[np.abs(both) <= tau]
+    rmse = float(np.sqrt(np.mean(both**2))) if len(both) else float("nan")
+    overlap = float(np.mean(np.concatenate([two_a, two_b])))
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return fitness, rmse, overlap, T
+
+
+def _angle_deg(R1: np.ndarray, R2: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(R1 @ R2.T) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+def _intersection_volume(first: "trimesh.Trimesh", later: "trimesh.Trimesh", T: np.ndarray) -> float:
+    import trimesh
+
+    return float(trimesh.boolean.intersection([first, later.copy().apply_transform(T)], engine="manifold").volume)
 
 
 def _refine(
