@@ -142,6 +142,8 @@ class Bench:
     """Objects batched per run (throughput)."""
     quick: bool = False
     """A subset that runs in about a minute (reconstruct)."""
+    sessions_only: bool = False
+    """reconstruct: only the objects also scanned a second time, turned over (the two-session columns)."""
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
     concealed: int = 40
@@ -279,7 +281,7 @@ def main(argv: list[str] | None = None) -> int:
             elif command.what == "reconstruct":
                 from twin.bench.reconstruct import bench_reconstruct
 
-                bench_reconstruct(quick=command.quick)
+                bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only)
             elif command.what == "push":
                 from twin.bench.push import bench_push
 

@@ -61,7 +61,8 @@ class _Case:
     sessions: bool = False  # also a second session, turned over, merged with the first
 
 
-def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_root: Path = DATA_ROOT) -> dict:
+def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_root: Path = DATA_ROOT,
+                      sessions_only: bool = False) -> dict:
     """Run the synthetic and the real benchmarks; print tables; write results.json and pictures to `out_dir`.
 
     Args:
@@ -69,24 +70,27 @@ def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_roo
         out_dir: where results.json and the pictures go (printed); default out/bench/reconstruct
             (reconstruct-quick for the subset).
         data_root: the shared data folder (workshop-tools/, mit-push/, rgbd/).
+        sessions_only: only the objects scanned twice, at the two noise levels, and no Kinect frames.
 
     Returns:
         The results, as written to results.json.
     """
-    out_dir = Path(out_dir or f"out/bench/reconstruct{'-quick' if quick else ''}")
+    suffix = "-quick" if quick else "-sessions" if sessions_only else ""
+    out_dir = Path(out_dir or f"out/bench/reconstruct{suffix}")
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    cases = _cases(data_root, quick)
+    cases = [c for c in _cases(data_root, quick) if c.sessions or not sessions_only]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases:
             truth = case.make()
-            for noise in (*NOISE_LEVELS, REFERENCE) if case.reference else NOISE_LEVELS:
-                rows.append(_run_case(case, truth, noise, Path(tmp), decompose=case.decompose and noise == "low"))
+            for noise in (*NOISE_LEVELS, REFERENCE) if case.reference and not sessions_only else NOISE_LEVELS:
+                decompose = case.decompose and noise == "low" and not sessions_only
+                rows.append(_run_case(case, truth, noise, Path(tmp), decompose=decompose))
                 _print_row(rows[-1], header=len(rows) == 1)
     summary = _summarise(rows)
     _print_summary(summary)
-    real = _run_kinect(data_root, out_dir, quick)
+    real = {} if sessions_only else _run_kinect(data_root, out_dir, quick)
     results = {"synthetic": rows, "summary": summary, "kinect": real, "total_s": time.perf_counter() - t0,
                "quick": quick}
     (out_dir / "results.json").write_text(json.dumps(results, indent=1, default=_plain))
