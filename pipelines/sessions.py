@@ -39,7 +39,7 @@ merged mesh is where the object lay in the first session.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
@@ -221,7 +221,8 @@ def register_session(
 
     screen = subsample(config.screen_points)
     screened = sorted(
-        ((*_refine(a, b, R0, t0, *screen, pivot, scale, config.normal_agreement, 30), label) for label, R0, t0 in starts),
+        ((*_refine(a, b, R0, t0, *screen, pivot, scale, config.normal_agreement, 30), label)
+         for label, R0, t0 in starts),
         key=lambda s: s[2],
     )
     # poses the observations hardly tell apart (a symmetric object turned over looks the same either way)

@@ -149,7 +149,8 @@ def write_report(path: Path, asset: dict, loss_history, traces: dict | None,
     session_rows = "".join(
         f"<tr><td>{html.escape(s['root'])}</td><td>{s['volume_m3'] * 1e6:.2f}</td>"
         + (f"<td>{s['registration']['fitness']:.3f}</td><td>{s['registration']['rmse_m'] * 1000:.3f}</td>"
-           f"<td>{s['registration']['overlap']:.2f}</td>" if "registration" in s else "<td colspan=3>first: defines the placement</td>")
+           f"<td>{s['registration']['overlap']:.2f}</td>" if "registration" in s
+           else "<td colspan=3>first: defines the placement</td>")
         + "</tr>"
         for s in sessions
     )

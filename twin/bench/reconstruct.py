@@ -433,7 +433,8 @@ _COLUMNS = (  # key, header, format (its width is the header's)
     ("two_volume_error_pct", "2-sess vol %", "{:+12.2f}"), ("two_chamfer_mm", "2-sess chamfer", "{:14.3f}"),
     ("two_com_shift_mm", "2-sess COM mm", "{:13.3f}"), ("registration_rotation_deg", "reg deg", "{:7.2f}"),
     ("registration_surface_mm", "reg surf mm", "{:11.3f}"),
-    ("exact_pose_volume_error_pct", "exact-pose vol %", "{:+16.2f}"), ("exact_pose_com_shift_mm", "exact-pose COM", "{:14.3f}"), ("registration_fitness", "fitness", "{:7.3f}"),
+    ("exact_pose_volume_error_pct", "exact-pose vol %", "{:+16.2f}"),
+    ("exact_pose_com_shift_mm", "exact-pose COM", "{:14.3f}"), ("registration_fitness", "fitness", "{:7.3f}"),
 )
 
 
