@@ -55,6 +55,7 @@ __all__ = [
     "SceneReconstruction",
     "reconstruct",
     "reconstruct_scene",
+    "simplify_watertight",
 ]
 
 _BLOCK = 8  # voxels per VoxelBlockGrid block side
@@ -135,6 +136,8 @@ class Reconstruction:
     support_plane: (normal [3], offset [m]) with normal . x + offset = 0 on the
       plane, normal pointing up (towards the cameras), world frame.
     object_points_count: back-projected points segmented as the object.
+    observed_points: those points, world frame [m], shape [n, 3], thinned to about one per pixel
+      footprint: the surface the cameras actually saw, as opposed to what closing added.
     voxel_size_m: TSDF voxel edge used [m].
     stats: timings [s], counts and intermediate values, JSON-serialisable.
     """
@@ -143,6 +146,7 @@ class Reconstruction:
     support_plane: tuple[np.ndarray, float]
     object_points_count: int
     voxel_size_m: float
+    observed_points: np.ndarray
     stats: dict = field(default_factory=dict)
 
 
@@ -227,7 +231,7 @@ def reconstruct(scan: Scan, config: ReconstructConfig = ReconstructConfig()) -> 
     mesh = _largest_volume(mesh, scan)
     _lower_cap(mesh, normal, offset, cut_m + 1e-3 * voxel)
     _smooth(mesh, normal, offset, config.smoothing_iterations)
-    mesh = _simplify(mesh, config.target_faces, scan)
+    mesh = simplify_watertight(mesh, config.target_faces, scan.root)
     stats["extract_s"] = time.perf_counter() - t3
     stats.update(
         faces=int(len(mesh.faces)),
@@ -244,6 +248,7 @@ def reconstruct(scan: Scan, config: ReconstructConfig = ReconstructConfig()) -> 
         support_plane=(normal, float(offset)),
         object_points_count=int(len(segmentation.object_points)),
         voxel_size_m=voxel,
+        observed_points=segmentation.object_points,
         stats=stats,
     )
 
@@ -801,8 +806,13 @@ def _smooth(mesh, normal: np.ndarray, offset: float, iterations: int) -> None:
     mesh.vertices = v
 
 
-def _simplify(mesh, target_faces: int, scan: Scan):
-    """Quadric decimation, keeping watertightness; falls back to milder decimation, then none."""
+def simplify_watertight(mesh, target_faces: int, where) -> "trimesh.Trimesh":
+    """Quadric decimation to about `target_faces` (0: none), keeping the mesh watertight and outward;
+    falls back to milder decimation, then none.
+
+    Raises:
+        ReconstructError: naming `where` (the scan) if the mesh is not a watertight volume even undecimated.
+    """
     import open3d as o3d
     import trimesh
 
@@ -829,6 +839,6 @@ def _simplify(mesh, target_faces: int, scan: Scan):
     if ok(mesh):
         return mesh
     raise ReconstructError(
-        f"{scan.root}: the reconstructed mesh is not watertight (watertight={mesh.is_watertight}, "
+        f"{where}: the reconstructed mesh is not watertight (watertight={mesh.is_watertight}, "
         f"volume={mesh.volume:.3g} m^3); try a larger voxel_size_m or sdf_trunc_voxels"
     )

@@ -31,6 +31,8 @@ class BuildConfig:
 
     source: Path
     logs: tuple[Path, ...]
+    scans: tuple[Path, ...] = ()
+    """Further scan sessions of the object, registered to SOURCE's and intersected with it (pipelines/sessions)."""
     output: Path = Path("out")
     holdout: Path | None = None
     material: str | None = None
@@ -111,6 +113,9 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     detection = timer.run("kind", detect_kind, trials[0], config.kind)
     log(f"motion: {detection.kind}" + (" (--kind)" if detection.forced else f" (BIC {detection.bic})"))
     mesh_world, name, hint, scan_stats = timer.run("scan + reconstruct", _object_mesh, config)
+    for session in scan_stats.get("sessions", [])[1:]:
+        r = session["registration"]
+        log(f"session {session['root']}: registered with fitness {r['fitness']:.3f}, RMSE {1000 * r['rmse_m']:.2f} mm")
     name = config.name or name
     placement = Pose(tuple(mesh_world.center_mass), (0.0, 0.0, 0.0, 1.0))
     mesh_object = mesh_world.copy()
@@ -346,6 +351,16 @@ def _object_mesh(config: BuildConfig):
     from pipelines.scan import read_scan
 
     source = Path(config.source)
+    if config.scans:
+        from pipelines.sessions import merge_sessions
+
+        for path in (source, *config.scans):
+            if not Path(path).is_dir():
+                raise BuildError(f"{path}: --scan needs scan directories (SOURCE and each --scan), not a mesh file")
+        scans = [read_scan(p) for p in (source, *config.scans)]
+        rec = merge_sessions(scans)
+        stats = {"frames": sum(len(s.frames) for s in scans), "voxel_size_m": rec.voxel_size_m, **rec.stats}
+        return rec.mesh, scans[0].name, scans[0].material_hint, stats
     if source.is_dir():
         scan = read_scan(source)
         rec = reconstruct(scan)

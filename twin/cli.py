@@ -17,6 +17,9 @@ class Build:
 
     source: tyro.conf.Positional[Path]
     """Scan directory (nerfstudio layout) or mesh file (.obj .stl .ply .glb, metres, world frame)."""
+    scan: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
+    """Another scan session of the same object in another resting pose (turned over, on its side), merged with
+    SOURCE's to see what one session cannot (under raised parts); repeat for more. SOURCE sets the placement."""
     logs: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
     """MCAP recording of an interaction; repeat for several trials."""
     holdout: Path | None = None
@@ -140,6 +143,8 @@ class Bench:
     """Objects batched per run (throughput)."""
     quick: bool = False
     """A subset that runs in about a minute (reconstruct)."""
+    sessions_only: bool = False
+    """reconstruct: only the objects also scanned a second time, turned over (the two-session columns)."""
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
     concealed: int = 40
@@ -161,7 +166,7 @@ def _run_build(args: Build) -> None:
 
     build(
         BuildConfig(
-            source=args.source, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
+            source=args.source, scans=args.scan, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
             name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
             optimizer=args.optimizer,
             vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind, base_mesh=args.base_mesh,
@@ -287,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
             elif command.what == "reconstruct":
                 from twin.bench.reconstruct import bench_reconstruct
 
-                bench_reconstruct(quick=command.quick)
+                bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only)
             elif command.what == "push":
                 from twin.bench.push import bench_push
 

@@ -148,6 +148,18 @@ def write_report(path: Path, asset: dict, loss_history, traces: dict | None,
         f"<td>{'ok' if c['ok'] else 'FAIL: ' + html.escape(str(c.get('error') or ''))}</td></tr>"
         for c in validation.get("checks", [])
     )
+    sessions = asset.get("provenance", {}).get("scan", {}).get("sessions", [])
+    session_rows = "".join(
+        f"<tr><td>{html.escape(s['root'])}</td><td>{s['volume_m3'] * 1e6:.2f}</td>"
+        + (f"<td>{s['registration']['fitness']:.3f}</td><td>{s['registration']['rmse_m'] * 1000:.3f}</td>"
+           f"<td>{s['registration']['overlap']:.2f}</td>" if "registration" in s
+           else "<td colspan=3>first: defines the placement</td>")
+        + "</tr>"
+        for s in sessions
+    )
+    session_table = (
+        "<h2>Scan sessions (intersected)</h2><table><tr><th>session</th><th>own solid [cm^3]</th><th>fitness</th>"
+        f"<th>RMSE [mm]</th><th>overlap</th></tr>{session_rows}</table>" if sessions else "")
     timings = asset.get("provenance", {}).get("timings_s", {})
     time_rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v:.2f}</td></tr>" for k, v in timings.items())
     loss_img = f'<img src="data:image/png;base64,{_loss_plot(loss_history)}">' if len(loss_history) else (
@@ -160,6 +172,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;font-size:90%}}</style></head><body
 <h1>{html.escape(asset['name'])} ({asset['kind']})</h1>
 <h2>Identified parameters (object frame, SI)</h2>
 <table><tr><th>parameter</th><th>value</th><th>std</th><th>source</th></tr>{rows}</table>
+{session_table}
 <h2>Fit (window {fit.get('window_s', 0):.2f} s)</h2>
 <table><tr><th></th><th>RMSE position [mm]</th><th>RMSE rotation [rad]</th><th>loss</th></tr>{fit_rows}</table>
 {trajectory_img}

@@ -58,9 +58,11 @@ class _Case:
     make: Callable  # () -> trimesh.Trimesh [m], resting on z = 0
     decompose: bool  # time CoACD on its (low-noise) reconstruction
     reference: bool = False  # also a noise-free scan
+    sessions: bool = False  # also a second session, turned over, merged with the first
 
 
-def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_root: Path = DATA_ROOT) -> dict:
+def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_root: Path = DATA_ROOT,
+                      sessions_only: bool = False) -> dict:
     """Run the synthetic and the real benchmarks; print tables; write results.json and pictures to `out_dir`.
 
     Args:
@@ -68,24 +70,27 @@ def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_roo
         out_dir: where results.json and the pictures go (printed); default out/bench/reconstruct
             (reconstruct-quick for the subset).
         data_root: the shared data folder (workshop-tools/, mit-push/, rgbd/).
+        sessions_only: only the objects scanned twice, at the two noise levels, and no Kinect frames.
 
     Returns:
         The results, as written to results.json.
     """
-    out_dir = Path(out_dir or f"out/bench/reconstruct{'-quick' if quick else ''}")
+    suffix = "-quick" if quick else "-sessions" if sessions_only else ""
+    out_dir = Path(out_dir or f"out/bench/reconstruct{suffix}")
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    cases = _cases(data_root, quick)
+    cases = [c for c in _cases(data_root, quick) if c.sessions or not sessions_only]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases:
             truth = case.make()
-            for noise in (*NOISE_LEVELS, REFERENCE) if case.reference else NOISE_LEVELS:
-                rows.append(_run_case(case, truth, noise, Path(tmp), decompose=case.decompose and noise == "low"))
+            for noise in (*NOISE_LEVELS, REFERENCE) if case.reference and not sessions_only else NOISE_LEVELS:
+                decompose = case.decompose and noise == "low" and not sessions_only
+                rows.append(_run_case(case, truth, noise, Path(tmp), decompose=decompose))
                 _print_row(rows[-1], header=len(rows) == 1)
     summary = _summarise(rows)
     _print_summary(summary)
-    real = _run_kinect(data_root, out_dir, quick)
+    real = {} if sessions_only else _run_kinect(data_root, out_dir, quick)
     results = {"synthetic": rows, "summary": summary, "kinect": real, "total_s": time.perf_counter() - t0,
                "quick": quick}
     (out_dir / "results.json").write_text(json.dumps(results, indent=1, default=_plain))
@@ -103,7 +108,8 @@ def _cases(data_root: Path, quick: bool) -> list[_Case]:
         (p, s) for p in PRIMITIVES for s in PRIMITIVE_SIZES_M]
     for kind, size in prims:  # CoACD's time does not depend on scale: one size per primitive
         make = lambda k=kind, s=size: _primitive(k, s)  # noqa: E731
-        cases.append(_Case(f"{kind} {size * 100:g} cm", "primitive", make, decompose=size == 0.10))
+        cases.append(_Case(f"{kind} {size * 100:g} cm", "primitive", make, decompose=size == 0.10,
+                           sessions=size == max(PRIMITIVE_SIZES_M)))
     tools_dir = data_root / "workshop-tools" / "data" / "Workshop Tools Dataset"
     push_dir = data_root / "mit-push" / "meshes" / "mit_push_objects_stl"
     tools = ("Hammer",) if quick else WORKSHOP_TOOLS
@@ -112,7 +118,7 @@ def _cases(data_root: Path, quick: bool) -> list[_Case]:
         path = tools_dir / tool / "mesh.ply"
         if path.is_file():
             make = lambda p=path: _rest(_watertight_from_mm(p))  # noqa: E731
-            cases.append(_Case(tool, "workshop-tools", make, decompose=True, reference=True))
+            cases.append(_Case(tool, "workshop-tools", make, decompose=True, reference=True, sessions=True))
     for shape in shapes:
         path = push_dir / f"StainlessSteel_{shape}.stl"
         if path.is_file():
@@ -190,6 +196,29 @@ def _rest(mesh):
     return _place(mesh)
 
 
+def _turned_over(mesh, rng: np.random.Generator):
+    """The resting mesh moved to the stable pose whose up is most nearly its down (turned over, or the nearest
+    to that), turned about z by a random angle and shifted by up to 3 cm: a second session's placement.
+
+    Returns the moved mesh and the 4x4 transform from the first placement to it.
+    """
+    import trimesh
+
+    transforms, probabilities = trimesh.poses.compute_stable_poses(mesh)
+    likely = [T for T, p in zip(transforms, probabilities) if p >= 0.02] or list(transforms)
+    # the object's up in each pose, in the first placement's frame: the last row of the rotation
+    T = min(likely, key=lambda T: T[2, 2])
+    T = trimesh.transformations.rotation_matrix(rng.uniform(0, 2 * np.pi), (0, 0, 1)) @ T
+    moved = mesh.copy()
+    moved.apply_transform(T)
+    lo, hi = moved.bounds
+    centre = np.array([0.3, -0.1]) + rng.uniform(-0.03, 0.03, 2)
+    shift = (centre[0] - 0.5 * (lo[0] + hi[0]), centre[1] - 0.5 * (lo[1] + hi[1]), -lo[2])
+    moved.apply_translation(shift)
+    T = trimesh.transformations.translation_matrix(shift) @ T
+    return moved, T
+
+
 def _place(mesh):
     """Resting on z = 0 with its box centred at (0.3, -0.1): away from the world origin on purpose."""
     lo, hi = mesh.bounds
@@ -242,6 +271,8 @@ def _run_case(case: _Case, truth, noise: str, tmp: Path, decompose: bool) -> dic
         voxel_mm=1000.0 * rec.voxel_size_m,
         faces=len(mesh.faces),
     )
+    if case.sessions and noise != REFERENCE:
+        row.update(_second_session(truth, rec, root, _render_config(framing, noise), case.name))
     if decompose:
         t1 = time.perf_counter()
         parts = run_decompose(mesh, DecomposeConfig(), cache_dir=None)
@@ -252,6 +283,51 @@ def _run_case(case: _Case, truth, noise: str, tmp: Path, decompose: bool) -> dic
             union_deviation_mean_mm=1000.0 * parts.stats.get("surface_deviation_mean_m", float("nan")),
         )
     return row
+
+
+def _second_session(truth, first, root: Path, render, name: str) -> dict:
+    """Render the object turned over (a pose change the merge is not told), merge with the first session's
+    reconstruction, and measure the merged mesh and the registration against the truth."""
+    from scipy.spatial.transform import Rotation
+
+    from pipelines.reconstruct import reconstruct
+    from pipelines.scan import read_scan
+    from pipelines.sessions import SessionError, merge_reconstructions
+    from pipelines.synth.render import render_scan
+
+    import trimesh
+
+    turned, T_turned = _turned_over(truth, np.random.default_rng(1))
+    second_root = root.with_name(root.name + "-turned")
+    render_scan(turned, second_root, render, np.random.default_rng(1), name)
+    t0 = time.perf_counter()
+    second = reconstruct(read_scan(second_root))
+    try:
+        merged = merge_reconstructions([first, second], [root, second_root])
+    except SessionError as e:
+        return {"two_error": str(e)}
+    two_s = time.perf_counter() - t0
+    # the same intersection at the true pose change: what registration error costs
+    exact = trimesh.boolean.intersection(
+        [first.mesh, second.mesh.copy().apply_transform(np.linalg.inv(T_turned))], engine="manifold")
+    registration = merged.stats["sessions"][1]["registration"]
+    T_error = np.asarray(registration["T_first_from_session"]) @ T_turned  # identity when exact
+    mesh = merged.mesh
+    return {
+        "two_volume_error_pct": 100.0 * (mesh.volume / truth.volume - 1.0),
+        "two_chamfer_mm": 1000.0 * _chamfer(mesh, truth),
+        "two_com_shift_mm": 1000.0 * float(np.linalg.norm(mesh.center_mass - truth.center_mass)),
+        "two_s": two_s,
+        "exact_pose_volume_error_pct": 100.0 * (exact.volume / truth.volume - 1.0),
+        "exact_pose_com_shift_mm": 1000.0 * float(np.linalg.norm(exact.center_mass - truth.center_mass)),
+        "registration_fitness": registration["fitness"],
+        "registration_rmse_mm": 1000.0 * registration["rmse_m"],
+        "registration_rotation_deg": float(np.degrees(Rotation.from_matrix(T_error[:3, :3]).magnitude())),
+        "registration_translation_mm": 1000.0 * float(np.linalg.norm(
+            T_error[:3, :3] @ truth.center_mass + T_error[:3, 3] - truth.center_mass)),
+        # what matters for a symmetric object (a cube turned over is the same cube): how far its surface moved
+        "registration_surface_mm": 1000.0 * _chamfer(truth, truth.copy().apply_transform(T_error)),
+    }
 
 
 def _chamfer(a, b, count: int = 20000) -> float:
@@ -354,6 +430,11 @@ _COLUMNS = (  # key, header, format (its width is the header's)
     ("volume_error_pct", "volume %", "{:+8.2f}"), ("chamfer_mm", "chamfer", "{:7.3f}"),
     ("com_shift_mm", " COM mm", "{:7.3f}"), ("tsdf_ms_per_frame", "TSDF ms", "{:7.1f}"), ("voxel_mm", "voxel", "{:5.2f}"),
     ("decompose_s", "CoACD s", "{:7.2f}"), ("part_count", "parts", "{:5d}"), ("union_volume_ratio", "union", "{:5.3f}"),
+    ("two_volume_error_pct", "2-sess vol %", "{:+12.2f}"), ("two_chamfer_mm", "2-sess chamfer", "{:14.3f}"),
+    ("two_com_shift_mm", "2-sess COM mm", "{:13.3f}"), ("registration_rotation_deg", "reg deg", "{:7.2f}"),
+    ("registration_surface_mm", "reg surf mm", "{:11.3f}"),
+    ("exact_pose_volume_error_pct", "exact-pose vol %", "{:+16.2f}"),
+    ("exact_pose_com_shift_mm", "exact-pose COM", "{:14.3f}"), ("registration_fitness", "fitness", "{:7.3f}"),
 )
 
 
@@ -363,6 +444,8 @@ def _print_row(row: dict, header: bool) -> None:
     if "error" in row:
         print(f"{row['object']:<20} {row['size_m']:6.3f} {row['noise']:<5} FAILED: {row['error']}", flush=True)
         return
+    if "two_error" in row:
+        print(f"{row['object']:<20} {row['size_m']:6.3f} {row['noise']:<5} two sessions FAILED: {row['two_error']}")
     print(" ".join(fmt.format(row[k]) if k in row else " " * len(h) for k, h, fmt in _COLUMNS), flush=True)
 
 
@@ -390,6 +473,18 @@ def _summarise(rows: list[dict]) -> dict:
                                   "within_target": sum(v <= TARGETS[key] for v in values)}
             label = "noise-free" if noise == REFERENCE else f"{noise} noise"
             out[f"{group}, {label}"] = entry
+    for noise in NOISE_LEVELS:  # the same objects merged with a second, turned-over session
+        sel = [r for r in rows if r["noise"] == noise and ("two_volume_error_pct" in r or "two_error" in r)]
+        if not sel:
+            continue
+        entry = {"objects": len(sel), "failed": sum("two_error" in r for r in sel)}
+        for key in ("volume_error_pct", "chamfer_mm", "com_shift_mm"):
+            values = [abs(r["two_" + key]) for r in sel if "two_" + key in r]
+            if values:
+                worst = max(sel, key=lambda r: abs(r.get("two_" + key, 0.0)))
+                entry[key] = {"median": statistics.median(values), "max": max(values), "worst": worst["object"],
+                              "within_target": sum(v <= TARGETS[key] for v in values)}
+        out[f"two sessions (workshop tools, 30 cm primitives), {noise} noise"] = entry
     for key in ("tsdf_ms_per_frame", "decompose_s"):
         values = [r[key] for r in rows if key in r]
         if values:
