@@ -117,11 +117,12 @@ class Bench:
     reconstruct: scans of real meshes and primitives (3-30 cm, two noise levels) against their truth; real Kinect frames.
     push: synthetic pushes with known friction (--seeds of them): friction, mass and yaw inertia errors.
     push-real: the MIT block pushes: friction per trial and its spread, quasi-static estimate, predictive validity.
+    push-mit: the MIT pushing dataset's trials (mass known): friction per trial, spread, predictive validity.
     diagnose: --concealed recordings with a hidden effect of random size and --clean ones, shuffled: effect found?
     """
 
     what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct",
-                                       "push", "push-real", "diagnose"]]
+                                       "push", "push-real", "push-mit", "diagnose"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -285,6 +286,10 @@ def main(argv: list[str] | None = None) -> int:
                 from twin.bench.push import bench_push_real
 
                 bench_push_real()
+            elif command.what == "push-mit":
+                from twin.bench.push_mit import bench_push_mit
+
+                bench_push_mit()
             elif command.what == "priors":
                 from twin.bench.priors import bench_priors
 
