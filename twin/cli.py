@@ -18,9 +18,9 @@ class Build:
     source: tyro.conf.Positional[Path]
     """Scan directory (nerfstudio layout) or mesh file (.obj .stl .ply .glb, metres, world frame)."""
     logs: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
-    """MCAP recording of an interaction; repeat for several trials."""
+    """MCAP recording of an interaction (or a MIT pushing-dataset .h5/.json trial); repeat for several trials."""
     holdout: Path | None = None
-    """MCAP recording kept out of the fit, used to measure predictive error."""
+    """Recording kept out of the fit, used to measure predictive error."""
     output: Annotated[Path, tyro.conf.arg(aliases=("-o",))] = Path("out")
     """Output directory; replaced only when the build succeeds."""
     material: str | None = None

@@ -229,7 +229,7 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
     2015 plastic-block bags: 0.1-0.3 N), which no offset estimate may include.
     With zeros before and after, the offset drifts linearly between them. Only
     when the pusher is never away is the whole stretch before the first motion
-    taken (the old single zero, preload included).
+    taken (a preload, if any, included).
     """
     grid, xy, _ = _planar_grid(recording, config, smooth=True)
     speed = np.linalg.norm(np.gradient(xy, grid, axis=0), axis=1)
@@ -248,9 +248,9 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
         tip = np.stack([np.interp(t_w, c.t_s, c.position[:, k]) for k in range(3)], axis=1)
         obj = np.stack([np.interp(t_w, grid, xy[:, k]) for k in range(2)], axis=1)
         distance = np.linalg.norm(tip[:, :2] - obj, axis=1)
-        onset = (t_w >= t_first) & (t_w <= t_first + 0.1)
         pushing_z = np.median(tip[(t_w >= t_first) & (t_w <= t_last), 2])
-        away = (distance > np.median(distance[onset]) + config.pusher_clear_m) | (tip[:, 2] > pushing_z + config.lift_m)
+        away = ((distance > np.interp(t_first, t_w, distance) + config.pusher_clear_m)
+                | (tip[:, 2] > pushing_z + config.lift_m))
     zeros = [m for m in (before & away, after & away) if m.sum() >= 10]
     source = "pusher away"
     if not zeros:
