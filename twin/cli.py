@@ -128,6 +128,10 @@ class Bench:
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
     seeds: int = 5
     """Noise draws per object (paper, mujoco)."""
+    blocks: tuple[str, ...] = ()
+    """push-real: block folders to run (St_block, Al_block, Plastic_block; default all)."""
+    offsets_only: bool = False
+    """push-real: only the quasi-static friction of every bag under three force-offset models (no Newton fits)."""
     paper_optimizer: bool = False
     """Also run RigPI's own optimizer on the same recordings (paper; adds about 20 s per draw)."""
     vlm_starts: bool = False
@@ -283,9 +287,12 @@ def main(argv: list[str] | None = None) -> int:
 
                 bench_push(command.seeds)
             elif command.what == "push-real":
-                from twin.bench.push import bench_push_real
+                from twin.bench.push import bench_push_offsets, bench_push_real
 
-                bench_push_real()
+                if command.offsets_only:
+                    bench_push_offsets()
+                else:
+                    bench_push_real(blocks=command.blocks)
             elif command.what == "push-mit":
                 from twin.bench.push_mit import bench_push_mit
 

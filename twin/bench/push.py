@@ -155,9 +155,9 @@ FREE = (True, False, True)
 """Real blocks: mu and I_zz fitted, the mass from the prior (unknown for every block; see bench push)."""
 
 
-def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction.png"),
-                    blocks: tuple[str, ...] = tuple(b.folder for b in BLOCKS)) -> dict:
-    """Print per-trial friction, per-block spread, and predictive validity; save the figure.
+def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
+    """Print per-trial friction, per-block spread, and predictive validity; save the figure
+    (docs/push_prediction.png, or docs/push_prediction_<blocks>.png for some of the blocks).
 
     Beside each trial's quasi-static estimate, the same with the force offset
     taken where it was before it came from pusher-away stretches: the median
@@ -168,6 +168,12 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
         replay_errors,
     )
 
+    known = tuple(b.folder for b in BLOCKS)
+    unknown = sorted(set(blocks) - set(known))
+    if unknown:
+        raise ValueError(f"push-real: unknown block(s) {unknown}, expected some of {list(known)}")
+    figure = Path("docs/push_prediction.png" if not blocks else f"docs/push_prediction_{'_'.join(blocks)}.png")
+    blocks = blocks or known
     bags = root / "ros2_mcap"
     if not bags.exists():
         raise RuntimeError(f"{bags}: the MIT pushing bags are not there")
@@ -269,6 +275,60 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
     _plot_prediction(prediction, figure)
     print(f"\nfigure: {figure}")
     return {"trials": trials, "summary": summary, "prediction": prediction}
+
+
+def bench_push_offsets(root: Path = DATA) -> list[dict]:
+    """Quasi-static friction of every block bag under three force-offset models, without the Newton fits.
+
+    resting: the median force before the block first moves, the pusher resting on
+    it (a preload, if any, counts as offset); away: the pusher-away zeros
+    (estimate_force_bias, what the fits use); drift: linear in time from the
+    resting zero to the away zero. A spread that falls from one model to another
+    points at the offset, not the friction, as what varies between trials.
+    """
+    from dataclasses import replace
+
+    from pipelines.identify.sliding import ForceBias, SlidingConfig, estimate_force_bias, quasi_static_friction
+
+    config = SlidingConfig()
+    resting_config = replace(config, pusher_clear_m=np.inf, lift_m=np.inf)  # the pusher is never away
+    rows = []
+    for block in BLOCKS:
+        body, _ = block_prior(block)
+        for trial_dir in sorted((root / "ros2_mcap" / block.folder).iterdir(),
+                                key=lambda p: int(p.name.rsplit("_", 1)[1])):
+            rec = read_block_trial(trial_dir, block)
+            away = estimate_force_bias(rec, config)
+            rest = estimate_force_bias(rec, resting_config)
+            models = {"resting": rest, "away": away,
+                      "drift": ForceBias(np.r_[rest.t_s, away.t_s], np.r_[rest.force_n, away.force_n], "drift")}
+            row = {"block": block.folder, "trial": trial_dir.name, "zeros": f"{len(away.t_s)} {away.source}",
+                   "offset_change_n": (away.force_n[-1, :2] - rest.force_n[0, :2]).tolist()}
+            try:
+                row.update({k: quasi_static_friction(rec, body, config, b, body.mass_kg) for k, b in models.items()})
+            except ValueError as exc:
+                row["skipped"] = str(exc).split(": ", 1)[1]
+            rows.append(row)
+    print("quasi-static mu (median pushing force over m g, prior mass) under three force-offset models:")
+    print(f"{'block':14} {'trial':20} {'resting':>7} {'away':>7} {'drift':>7}  offset away - resting, world x y [N]; "
+          "away zeros")
+    for r in rows:
+        change = "({:+.3f}, {:+.3f})".format(*r["offset_change_n"])
+        if "skipped" in r:
+            print(f"{r['block']:14} {r['trial']:20} skipped: {r['skipped']}  {change}")
+            continue
+        print(f"{r['block']:14} {r['trial']:20} {r['resting']:7.3f} {r['away']:7.3f} {r['drift']:7.3f}  {change}; "
+              f"{r['zeros']}")
+    print(f"\n{'block':14} {'trials':>6} " + " ".join(f"{m + ' mean':>12} {m + ' CV %':>12}"
+                                                       for m in ("resting", "away", "drift")))
+    for block in BLOCKS:
+        got = [r for r in rows if r["block"] == block.folder and "skipped" not in r]
+        cells = []
+        for m in ("resting", "away", "drift"):
+            v = np.array([r[m] for r in got])
+            cells.append(f"{v.mean():12.3f} {100 * v.std(ddof=1) / v.mean():12.2f}")
+        print(f"{block.folder:14} {len(got):6d} " + " ".join(cells))
+    return rows
 
 
 def _plot_prediction(prediction: list[dict], figure: Path,
