@@ -35,9 +35,10 @@ def test_real_raw_trial_reads_as_a_push():
     np.testing.assert_array_equal(rec.wrench.force[:, :2], -rec.wrench_raw.force[:, :2])
     # pushing (force above 1 N): the tip is at the face, 45 mm half side plus the 4.75 mm tip, of the rect1 block
     pushing = np.linalg.norm(rec.wrench.force[:, :2], axis=1) > 1.0
-    tip = rec.contact.position[np.searchsorted(rec.contact.t_s, rec.wrench.t_s[pushing]).clip(0, len(rec.contact.t_s) - 1)]
-    obj, _ = rec.pose.interpolate(rec.wrench.t_s[pushing])
-    distance = np.linalg.norm(tip[:, :2] - obj[:, :2], axis=1)
+    t = rec.wrench.t_s[pushing]
+    tip = np.stack([np.interp(t, rec.contact.t_s, rec.contact.position[:, k]) for k in range(2)], axis=1)
+    obj, _ = rec.pose.interpolate(t)
+    distance = np.linalg.norm(tip - obj[:, :2], axis=1)
     assert 0.045 < np.median(distance) < 0.075
     moved = rec.pose.position[-1, :2] - rec.pose.position[0, :2]
     assert np.linalg.norm(moved) > 0.005

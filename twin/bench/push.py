@@ -164,7 +164,8 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
     force before the block first moves, with the pusher already resting on it.
     """
     from pipelines.identify.sliding import (
-        ForceBias, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
+        ForceBias, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
+        quasi_static_friction,
         replay_errors,
     )
 
@@ -242,7 +243,8 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
 
     print("per trial (mass from the prior's material density unless 'data' says the pushes determined it):")
     print(f"{'block':14} {'trial':20} {'mu':>6} {'m kg':>6} {'mu*m':>6} {'data':>4} {'win':>3} {'mu qs':>6} "
-          f"{'qs rest':>7} {'qs drift':>8} {'zeros':>5} {'drift N':>7} {'turn deg':>8} {'rmse mm':>7} {'rmse deg':>8} {'s':>5}")
+          f"{'qs rest':>7} {'qs drift':>8} {'zeros':>5} {'drift N':>7} {'turn deg':>8} {'rmse mm':>7} "
+          f"{'rmse deg':>8} {'s':>5}")
     for r in trials:
         if "skipped" in r:
             print(f"{r['block']:14} {r['trial']:20} skipped: {r['skipped']}")
@@ -252,7 +254,8 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
         drift = float(np.linalg.norm(r["rest_n"] - b.force_n[-1, :2])) if len(b.t_s) else 0.0
         zeros = f"{len(b.t_s)}{'a' if b.source == 'pusher away' else 'b'}"
         print(f"{r['block']:14} {r['trial']:20} {r['mu']:6.3f} {r['mass']:6.3f} {r['mu_m']:6.3f} {flags:>4} "
-              f"{r['windows']:3d} {r['mu_qs_prior_mass']:6.3f} {r['mu_qs_resting_zero']:7.3f} {r['mu_qs_drift']:8.3f} {zeros:>5} "
+              f"{r['windows']:3d} {r['mu_qs_prior_mass']:6.3f} {r['mu_qs_resting_zero']:7.3f} "
+              f"{r['mu_qs_drift']:8.3f} {zeros:>5} "
               f"{drift:7.3f} {r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} {r['rmse_heading_deg']:8.2f} {r['seconds']:5.1f}")
     print("zeros: how many force-offset zeros, 'a' with the pusher away, 'b' before the first motion (pusher resting);"
           " qs rest: the quasi-static mu with the offset from before the first motion (pusher resting on the block);"
@@ -286,8 +289,6 @@ def bench_push_offsets(root: Path = DATA) -> list[dict]:
     resting zero to the away zero. A spread that falls from one model to another
     points at the offset, not the friction, as what varies between trials.
     """
-    from dataclasses import replace
-
     from pipelines.identify.sliding import ForceBias, SlidingConfig, estimate_force_bias, quasi_static_friction
 
     config = SlidingConfig()

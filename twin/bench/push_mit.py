@@ -74,7 +74,8 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
         rec = read_push_trial(path)
         bias = estimate_force_bias(rec, config)
         row = {"trial": path.name, "pair": f"{name.shape}/{name.surface}", "name": name, "mass": body.mass_kg,
-               "turn_deg": _net_yaw_deg(rec), "bias_n": float(np.max(np.linalg.norm(bias.force_n[:, :2], axis=1), initial=0.0)),
+               "turn_deg": _net_yaw_deg(rec),
+               "bias_n": float(np.max(np.linalg.norm(bias.force_n[:, :2], axis=1), initial=0.0)),
                "bias_source": bias.source}
         try:
             windows = push_windows(rec, body, config, bias)
