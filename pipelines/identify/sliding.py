@@ -110,6 +110,9 @@ class SlidingConfig:
     much farther from the object's origin, horizontally, than when the object first moved [m] ..."""
     lift_m: float = 0.01
     """... or this far above its height while pushing [m] (a pusher lifted off may stay above the object)."""
+    preload_fraction: float = 0.05
+    """A pusher resting on the object before the push preloads it when the force then exceeds the
+    pusher-away zero after the push, along the push, by this fraction of the median pushing force."""
     jump_m: float = 0.005
     """Tracker samples further than this from a running median are dropped [m]."""
     twist_half_width: int = 3
@@ -224,12 +227,16 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
     A zero is a stretch, more than `margin_s` before the object first moves or
     after it last moves, where the pusher is away: its contact point farther
     from the object, by config.pusher_clear_m, than as the object started to
-    move, or config.lift_m above its height while pushing. A pusher that rests against
-    the object before the push can preload it while static friction holds (the
-    2015 plastic-block bags: 0.1-0.3 N), which no offset estimate may include.
-    With zeros before and after, the offset drifts linearly between them. Only
-    when the pusher is never away is the whole stretch before the first motion
-    taken (a preload, if any, included).
+    move, or config.lift_m above its height while pushing. With zeros before
+    and after, the offset drifts linearly between them.
+
+    Where the pusher rests against the object before the push (no zero before
+    it), that resting stretch is the offset, taken in the pose the push is
+    made in, unless it shows a preload: the pusher pressing while static
+    friction holds reads higher ALONG the push than the zero after it, by more
+    than config.preload_fraction of the median pushing force (the 2015
+    plastic-block bags: 0.08-0.28 N of a 0.5 N push). Then the zero after the
+    push is the offset. `source` says which.
     """
     grid, xy, _ = _planar_grid(recording, config, smooth=True)
     speed = np.linalg.norm(np.gradient(xy, grid, axis=0), axis=1)
@@ -251,12 +258,23 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
         pushing_z = np.median(tip[(t_w >= t_first) & (t_w <= t_last), 2])
         away = ((distance > np.interp(t_first, t_w, distance) + config.pusher_clear_m)
                 | (tip[:, 2] > pushing_z + config.lift_m))
-    zeros = [m for m in (before & away, after & away) if m.sum() >= 10]
-    source = "pusher away"
-    if not zeros:
-        zeros, source = ([before], "before the first motion") if before.sum() >= 10 else ([], "none")
-    return ForceBias(np.array([np.median(t_w[m]) for m in zeros]),
-                     np.array([np.median(w.force[m], axis=0) for m in zeros]).reshape(-1, 3), source)
+
+    def zero(mask):
+        return float(np.median(t_w[mask])), np.median(w.force[mask], axis=0)
+
+    first = zero(before & away) if (before & away).sum() >= 10 else None
+    last = zero(after & away) if (after & away).sum() >= 10 else None
+    if first is None and before.sum() >= 10:
+        resting = zero(before)
+        if last is not None:
+            pushing = np.median(w.force[(t_w >= t_first) & (t_w <= t_last)] - last[1], axis=0)[:2]
+            excess = float((resting[1] - last[1])[:2] @ pushing) / max(float(np.linalg.norm(pushing)), 1e-9)
+            if excess > config.preload_fraction * np.linalg.norm(pushing):
+                return ForceBias(np.array([last[0]]), last[1][None], "pusher away after a preload")
+        return ForceBias(np.array([resting[0]]), resting[1][None], "pusher resting before the push")
+    zeros = [z for z in (first, last) if z is not None]
+    return ForceBias(np.array([z[0] for z in zeros]), np.array([z[1] for z in zeros]).reshape(-1, 3),
+                     "pusher away" if zeros else "none")
 
 
 def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: ForceBias | None = None,

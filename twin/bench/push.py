@@ -183,13 +183,15 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
     for block in (b for b in BLOCKS if b.folder in blocks):
         body, mu_prior = block_prior(block)
         resting = replace(config, pusher_clear_m=np.inf, lift_m=np.inf)  # the pusher is never away
+        preloaded = replace(config, preload_fraction=-np.inf)  # a resting pusher always preloads
         per_block = []
         for trial_dir in sorted((bags / block.folder).iterdir(), key=lambda p: int(p.name.rsplit("_", 1)[1])):
             t0 = time.perf_counter()
             rec = read_block_trial(trial_dir, block)
             bias = estimate_force_bias(rec, config)
             rest = estimate_force_bias(rec, resting)
-            drift = ForceBias(np.r_[rest.t_s, bias.t_s], np.r_[rest.force_n, bias.force_n], "linear, rest to away")
+            away = estimate_force_bias(rec, preloaded)
+            drift = ForceBias(np.r_[rest.t_s, away.t_s], np.r_[rest.force_n, away.force_n], "linear, rest to away")
             try:
                 windows = push_windows(rec, body, config, bias)
             except ValueError as exc:
@@ -203,7 +205,8 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
                 "mu_qs_prior_mass": quasi_static_friction(rec, body, config, bias, body.mass_kg),
                 "mu_qs_resting_zero": quasi_static_friction(rec, body, config, rest, body.mass_kg),
                 "mu_qs_drift": quasi_static_friction(rec, body, config, drift, body.mass_kg),
-                "bias": bias, "rest_n": rest.force_n[0, :2], "rmse_mm": 1e3 * fit.rmse_position_m,
+                "bias": bias, "rest_n": rest.force_n[0, :2], "away_n": away.force_n[-1, :2],
+                "rmse_mm": 1e3 * fit.rmse_position_m,
                 "rmse_heading_deg": float(np.degrees(fit.rmse_heading_rad)), "turn_deg": _net_yaw_deg(rec),
                 "seconds": time.perf_counter() - t0, "windows_data": windows, "theta": fit.theta,
             }
@@ -251,15 +254,15 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
             continue
         flags = "".join("y" if d else "n" for d in r["determined"])
         b = r["bias"]
-        drift = float(np.linalg.norm(r["rest_n"] - b.force_n[-1, :2])) if len(b.t_s) else 0.0
-        zeros = f"{len(b.t_s)}{'a' if b.source == 'pusher away' else 'b'}"
+        drift = float(np.linalg.norm(r["rest_n"] - r["away_n"]))
+        zeros = f"{len(b.t_s)}{'r' if b.source.startswith('pusher resting') else 'a'}"
         print(f"{r['block']:14} {r['trial']:20} {r['mu']:6.3f} {r['mass']:6.3f} {r['mu_m']:6.3f} {flags:>4} "
               f"{r['windows']:3d} {r['mu_qs_prior_mass']:6.3f} {r['mu_qs_resting_zero']:7.3f} "
               f"{r['mu_qs_drift']:8.3f} {zeros:>5} "
               f"{drift:7.3f} {r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} {r['rmse_heading_deg']:8.2f} {r['seconds']:5.1f}")
-    print("zeros: how many force-offset zeros, 'a' with the pusher away, 'b' before the first motion (pusher resting);"
-          " qs rest: the quasi-static mu with the offset from before the first motion (pusher resting on the block);"
-          " qs drift: linear from that to the pusher-away zero; drift N: their difference")
+    print("zeros: how many force-offset zeros the fit used, 'a' with the pusher away, 'r' resting on the block before "
+          "the push; qs rest: the quasi-static mu with the resting offset; qs drift: linear from that to the "
+          "pusher-away zero after the push; drift N: their difference")
     print("\nper block:")
     print(f"{'block':14} {'trials':>6} {'prior m kg':>10} {'mu prior':>8} {'mu mean':>7} {'mu CV %':>7} "
           f"{'mu*m CV %':>9} {'qs mean':>7} {'qs CV %':>7} {'qs rest mean':>12} {'qs rest CV %':>12} "
@@ -284,26 +287,28 @@ def bench_push_offsets(root: Path = DATA) -> list[dict]:
     """Quasi-static friction of every block bag under three force-offset models, without the Newton fits.
 
     resting: the median force before the block first moves, the pusher resting on
-    it (a preload, if any, counts as offset); away: the pusher-away zeros
-    (estimate_force_bias, what the fits use); drift: linear in time from the
-    resting zero to the away zero. A spread that falls from one model to another
+    it (a preload, if any, counts as offset); away: the zero after the push, the
+    pusher lifted; drift: linear in time from the resting zero to the away zero.
+    The last column names the one the fits use (estimate_force_bias). A spread that falls from one model to another
     points at the offset, not the friction, as what varies between trials.
     """
     from pipelines.identify.sliding import ForceBias, SlidingConfig, estimate_force_bias, quasi_static_friction
 
     config = SlidingConfig()
     resting_config = replace(config, pusher_clear_m=np.inf, lift_m=np.inf)  # the pusher is never away
+    away_config = replace(config, preload_fraction=-np.inf)  # a resting pusher always preloads
     rows = []
     for block in BLOCKS:
         body, _ = block_prior(block)
         for trial_dir in sorted((root / "ros2_mcap" / block.folder).iterdir(),
                                 key=lambda p: int(p.name.rsplit("_", 1)[1])):
             rec = read_block_trial(trial_dir, block)
-            away = estimate_force_bias(rec, config)
+            chosen = estimate_force_bias(rec, config)
+            away = estimate_force_bias(rec, away_config)
             rest = estimate_force_bias(rec, resting_config)
             models = {"resting": rest, "away": away,
                       "drift": ForceBias(np.r_[rest.t_s, away.t_s], np.r_[rest.force_n, away.force_n], "drift")}
-            row = {"block": block.folder, "trial": trial_dir.name, "zeros": f"{len(away.t_s)} {away.source}",
+            row = {"block": block.folder, "trial": trial_dir.name, "zeros": chosen.source,
                    "offset_change_n": (away.force_n[-1, :2] - rest.force_n[0, :2]).tolist()}
             try:
                 row.update({k: quasi_static_friction(rec, body, config, b, body.mass_kg) for k, b in models.items()})
@@ -312,7 +317,7 @@ def bench_push_offsets(root: Path = DATA) -> list[dict]:
             rows.append(row)
     print("quasi-static mu (median pushing force over m g, prior mass) under three force-offset models:")
     print(f"{'block':14} {'trial':20} {'resting':>7} {'away':>7} {'drift':>7}  offset away - resting, world x y [N]; "
-          "away zeros")
+          "the offset the fit uses (estimate_force_bias)")
     for r in rows:
         change = "({:+.3f}, {:+.3f})".format(*r["offset_change_n"])
         if "skipped" in r:

@@ -91,14 +91,19 @@ def _rested_push(preload_n: float, drift_n: float, lift_at_end: bool) -> Recordi
 
 
 def test_force_bias_skips_a_preload_and_follows_a_drift():
-    """With the pusher resting on the block before the push, the offset comes from after it lifts off
-    (the preload left out); zeros on both sides give a linear drift."""
+    """A pusher resting on the block before the push: a preload along the push sends the offset to the
+    zero after the pusher lifts off; without one the resting stretch is the offset. Zeros with the
+    pusher clear on both sides give a linear drift."""
     rested = estimate_force_bias(_rested_push(0.3, 0.0, lift_at_end=True), SlidingConfig())
-    assert rested.source == "pusher away" and len(rested.t_s) == 1
+    assert rested.source == "pusher away after a preload" and len(rested.t_s) == 1
     np.testing.assert_allclose(rested.at([0.0, 3.0]), [[0.2, -0.1, 0.0]] * 2, atol=1e-9)
 
+    unloaded = estimate_force_bias(_rested_push(0.0, 0.16, lift_at_end=True), SlidingConfig())
+    assert unloaded.source == "pusher resting before the push"
+    np.testing.assert_allclose(unloaded.at([3.0])[0, 0], 0.2 + 0.02 * 0.85, atol=0.01)  # median over 0-1.7 s
+
     never_away = estimate_force_bias(_rested_push(0.3, 0.0, lift_at_end=False), SlidingConfig())
-    assert never_away.source == "before the first motion"
+    assert never_away.source == "pusher resting before the push"  # no zero after: a preload cannot be seen
     np.testing.assert_allclose(never_away.at([3.0])[0], [0.5, -0.1, 0.0], atol=1e-9)
 
     clear = _rested_push(0.0, 0.16, lift_at_end=True)
