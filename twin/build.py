@@ -57,8 +57,14 @@ class BuildConfig:
     """The wrench messages give the force on the sensor (the object's reaction): negate them."""
 
     def read(self, path: Path):
-        """One recording, read with this build's topic, frame and rotation options."""
+        """One recording, read with this build's topic, frame and rotation options (MCAP), or a
+        MIT pushing-dataset trial (.h5 or .json, whose layout fixes roles and frames)."""
         from pipelines.logs import read_recording
+
+        if Path(path).suffix in (".h5", ".json"):
+            from pipelines.push_dataset import read_push_trial
+
+            return read_push_trial(path)
 
         return read_recording(path, dict(self.topics), dict(self.frames), self.wrench_rotation_xyzw,
                               self.wrench_reaction)

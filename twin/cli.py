@@ -21,9 +21,9 @@ class Build:
     """Another scan session of the same object in another resting pose (turned over, on its side), merged with
     SOURCE's to see what one session cannot (under raised parts); repeat for more. SOURCE sets the placement."""
     logs: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
-    """MCAP recording of an interaction; repeat for several trials."""
+    """MCAP recording of an interaction (or a MIT pushing-dataset .h5/.json trial); repeat for several trials."""
     holdout: Path | None = None
-    """MCAP recording kept out of the fit, used to measure predictive error."""
+    """Recording kept out of the fit, used to measure predictive error."""
     output: Annotated[Path, tyro.conf.arg(aliases=("-o",))] = Path("out")
     """Output directory; replaced only when the build succeeds."""
     material: str | None = None
@@ -121,16 +121,21 @@ class Bench:
     reconstruct: scans of real meshes and primitives (3-30 cm, two noise levels) against their truth; real Kinect frames.
     push: synthetic pushes with known friction (--seeds of them): friction, mass and yaw inertia errors.
     push-real: the MIT block pushes: friction per trial and its spread, quasi-static estimate, predictive validity.
+    push-mit: the MIT pushing dataset's trials (mass known): friction per trial, spread, predictive validity.
     diagnose: --concealed recordings with a hidden effect of random size and --clean ones, shuffled: effect found?
     """
 
     what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct",
-                                       "push", "push-real", "diagnose"]]
+                                       "push", "push-real", "push-mit", "diagnose"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
     seeds: int = 5
     """Noise draws per object (paper, mujoco)."""
+    blocks: tuple[str, ...] = ()
+    """push-real: block folders to run (St_block, Al_block, Plastic_block; default all)."""
+    offsets_only: bool = False
+    """push-real: only the quasi-static friction of every bag under three force-offset models (no Newton fits)."""
     paper_optimizer: bool = False
     """Also run RigPI's own optimizer on the same recordings (paper; adds about 20 s per draw)."""
     vlm_starts: bool = False
@@ -298,9 +303,16 @@ def main(argv: list[str] | None = None) -> int:
 
                 bench_push(command.seeds)
             elif command.what == "push-real":
-                from twin.bench.push import bench_push_real
+                from twin.bench.push import bench_push_offsets, bench_push_real
 
-                bench_push_real()
+                if command.offsets_only:
+                    bench_push_offsets()
+                else:
+                    bench_push_real(blocks=command.blocks)
+            elif command.what == "push-mit":
+                from twin.bench.push_mit import bench_push_mit
+
+                bench_push_mit()
             elif command.what == "priors":
                 from twin.bench.priors import bench_priors
 

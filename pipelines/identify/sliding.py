@@ -33,6 +33,7 @@ from scipy.spatial.transform import Rotation
 from .windows import local_twist, lowpass
 
 __all__ = [
+    "ForceBias",
     "PlanarBody",
     "PushWindows",
     "SlidingConfig",
@@ -89,7 +90,7 @@ class SlidingConfig:
     yaw_length_m: heading errors are weighted as arc lengths at this radius
         (default: the face's half diagonal) [m].
     mu_bounds: admissible friction coefficients.
-    smoothing_hz: zero-phase low-pass of the poses when finding the first motion (bias).
+    smoothing_hz: zero-phase low-pass of the poses when finding the first and last motion (bias).
     twist_half_width: samples each side of a window's start in the quadratic fit
         of its start velocity.
     max_iterations: L-BFGS-B iterations.
@@ -104,6 +105,14 @@ class SlidingConfig:
     smoothing_hz: float = 10.0
     sample_period_s: float = 0.01
     """Pose samples are resampled to this period [s], so windows of any recording share one batch."""
+    pusher_clear_m: float = 0.003
+    """The pusher is away from the object (a zero of the force offset) once its contact point is this
+    much farther from the object's origin, horizontally, than when the object first moved [m] ..."""
+    lift_m: float = 0.01
+    """... or this far above its height while pushing [m] (a pusher lifted off may stay above the object)."""
+    preload_fraction: float = 0.05
+    """A pusher resting on the object before the push preloads it when the force then exceeds the
+    pusher-away zero after the push, along the push, by this fraction of the median pushing force."""
     jump_m: float = 0.005
     """Tracker samples further than this from a running median are dropped [m]."""
     twist_half_width: int = 3
@@ -185,30 +194,94 @@ def _yaw(quat_xyzw: np.ndarray) -> np.ndarray:
     return np.arctan2(x_axis[:, 1], x_axis[:, 0])
 
 
-def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3) -> np.ndarray:
-    """Constant offset of the measured force, world x, y, z [N]: its median before the object first moves.
+@dataclass(frozen=True)
+class ForceBias:
+    """Offset of the measured force (measured = applied + offset), world x, y, z [N], over time.
 
-    Samples up to `margin_s` before the first sustained motion are left out (the
-    pusher may already press while friction holds). The F/T sensors of real bags
-    are often not zeroed (mit-push README). Zeros when there is no such interval.
+    Measured at "zeros", stretches where the object is still and nothing pushes
+    it; linear in time between zeros, held before the first and after the last.
+    t_s [K]: each zero's median stamp [s]; force_n [K, 3]: its median force [N]
+    (K = 0: no zero found, no offset); source: where the zeros were taken.
+    """
+
+    t_s: np.ndarray
+    force_n: np.ndarray
+    source: str
+
+    def at(self, t_s) -> np.ndarray:
+        """The offset [N] at stamps t_s [s], shape (len(t_s), 3)."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=float))
+        if len(self.t_s) == 0:
+            return np.zeros((len(t), 3))
+        return np.stack([np.interp(t, self.t_s, self.force_n[:, k]) for k in range(3)], axis=1)
+
+    def provenance(self) -> dict:
+        return {"source": self.source, "t_s": list(map(float, self.t_s)),
+                "force_n": [list(map(float, f)) for f in self.force_n]}
+
+
+def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3) -> ForceBias:
+    """The force sensor's offset from the recording's zeros (see ForceBias); real F/T sensors are
+    often not zeroed (mit-push README).
+
+    A zero is a stretch, more than `margin_s` before the object first moves or
+    after it last moves, where the pusher is away: its contact point farther
+    from the object, by config.pusher_clear_m, than as the object started to
+    move, or config.lift_m above its height while pushing. With zeros before
+    and after, the offset drifts linearly between them.
+
+    Where the pusher rests against the object before the push (no zero before
+    it), that resting stretch is the offset, taken in the pose the push is
+    made in, unless it shows a preload: the pusher pressing while static
+    friction holds reads higher ALONG the push than the zero after it, by more
+    than config.preload_fraction of the median pushing force (the 2015
+    plastic-block bags: 0.08-0.28 N of a 0.5 N push). Then the zero after the
+    push is the offset. `source` says which.
     """
     grid, xy, _ = _planar_grid(recording, config, smooth=True)
     speed = np.linalg.norm(np.gradient(xy, grid, axis=0), axis=1)
     run = 10  # samples: a filter's edge or a tracker glitch is not motion
     fast = (speed > config.moving_speed_m_s).astype(float)
     moving = np.flatnonzero(np.convolve(fast, np.ones(run), "valid") == run)
-    t_w = recording.wrench.t_s
-    quiet = t_w < (grid[moving[0]] if len(moving) else grid[-1]) - margin_s
-    if quiet.sum() < 10:
-        return np.zeros(3)
-    return np.median(recording.wrench.force[quiet], axis=0)
+    w = recording.wrench
+    t_w = w.t_s
+    t_first = grid[moving[0]] if len(moving) else grid[-1]
+    t_last = grid[moving[-1] + run - 1] if len(moving) else grid[-1]
+    before = t_w < t_first - margin_s
+    after = t_w > t_last + margin_s
+    away = np.zeros(len(t_w), dtype=bool)
+    c = recording.contact
+    if c is not None and len(moving):
+        tip = np.stack([np.interp(t_w, c.t_s, c.position[:, k]) for k in range(3)], axis=1)
+        obj = np.stack([np.interp(t_w, grid, xy[:, k]) for k in range(2)], axis=1)
+        distance = np.linalg.norm(tip[:, :2] - obj, axis=1)
+        pushing_z = np.median(tip[(t_w >= t_first) & (t_w <= t_last), 2])
+        away = ((distance > np.interp(t_first, t_w, distance) + config.pusher_clear_m)
+                | (tip[:, 2] > pushing_z + config.lift_m))
+
+    def zero(mask):
+        return float(np.median(t_w[mask])), np.median(w.force[mask], axis=0)
+
+    first = zero(before & away) if (before & away).sum() >= 10 else None
+    last = zero(after & away) if (after & away).sum() >= 10 else None
+    if first is None and before.sum() >= 10:
+        resting = zero(before)
+        if last is not None:
+            pushing = np.median(w.force[(t_w >= t_first) & (t_w <= t_last)] - last[1], axis=0)[:2]
+            excess = float((resting[1] - last[1])[:2] @ pushing) / max(float(np.linalg.norm(pushing)), 1e-9)
+            if excess > config.preload_fraction * np.linalg.norm(pushing):
+                return ForceBias(np.array([last[0]]), last[1][None], "pusher away after a preload")
+        return ForceBias(np.array([resting[0]]), resting[1][None], "pusher resting before the push")
+    zeros = [z for z in (first, last) if z is not None]
+    return ForceBias(np.array([z[0] for z in zeros]), np.array([z[1] for z in zeros]).reshape(-1, 3),
+                     "pusher away" if zeros else "none")
 
 
-def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: np.ndarray | None = None,
+def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: ForceBias | None = None,
                  moving_only: bool = True) -> PushWindows:
     """Back-to-back windows over the part of `recording` where the pusher touches the object.
 
-    The force is the recording's world-axes wrench force minus `bias`; the contact
+    The force is the recording's world-axes wrench force minus `bias` at its stamps; the contact
     point is the recording's contact track (required: a push is a force at a point).
     With moving_only, windows where the object does not slide are left out.
     """
@@ -217,7 +290,6 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: np.nd
             f"{recording.path}: sliding needs the contact point of the pushing force "
             "(a PointStamped or pose topic; name it with --topic contact=/name)"
         )
-    bias = np.zeros(3) if bias is None else np.asarray(bias, dtype=float)
     grid, xy, yaw = _planar_grid(recording, config, smooth=False)  # smoothing would blunt stops
     period = grid[1] - grid[0]
     substeps = max(1, int(round(period / config.dt_s)))
@@ -243,7 +315,7 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: np.nd
         )
     starts = np.asarray(starts)
     w = recording.wrench
-    force = w.force[:, :2] - bias[:2]  # unfiltered: its noise averages out in the integration
+    force = w.force[:, :2] - (bias.at(w.t_s)[:, :2] if bias is not None else 0.0)  # unfiltered: noise averages out
     t_step = grid[starts][None, :] + dt * np.arange(samples * substeps)[:, None]
     f = np.stack([np.interp(t_step, w.t_s, force[:, k]) for k in range(2)], axis=-1)
     p = np.stack([np.interp(t_step, c.t_s, c.position[:, k]) for k in range(2)], axis=-1)
@@ -629,16 +701,18 @@ def identify_sliding(
     H_post = H + np.diag(prior_curv[free_idx])
     cov = np.linalg.pinv(H_post)
     std_log = np.array(prior_std, dtype=float)
-    std_log[free_idx] = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    # determined: the data at least halve the prior's variance (mu has no prior: determined when free)
-    determined = tuple(bool(free[i] and (not np.isfinite(prior_std[i]) or std_log[i] ** 2 < 0.5 * prior_std[i] ** 2))
+    # a parameter the loss is flat in (e.g. mu while every window sticks) has no curvature: unknown, not exact
+    std_log[free_idx] = np.where(np.diag(H_post) > 1e-12, np.sqrt(np.maximum(np.diag(cov), 0.0)), np.inf)
+    # determined: the data at least halve the prior's variance (mu has no prior: determined when it has curvature)
+    determined = tuple(bool(free[i] and np.isfinite(std_log[i])
+                            and (not np.isfinite(prior_std[i]) or std_log[i] ** 2 < 0.5 * prior_std[i] ** 2))
                        for i in range(3))
     std = theta * np.where(np.isfinite(std_log), std_log, 0.0)
     rmse_p, rmse_h = replay_errors(rollout, theta, correction)
     return SlidingFit(theta, std, determined, rmse_p, rmse_h, W, len(history), history, correction=correction)
 
 
-def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bias: np.ndarray,
+def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bias: ForceBias,
                           mass_kg: float) -> float:
     """The lab's estimate, mu = steady pushing force / (m g).
 
@@ -657,7 +731,7 @@ def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bi
 class PushedIdentification:
     """What `identify_pushed` gives the build.
 
-    fit: the sliding fit on the trials; bias_force_n: per trial [N, world];
+    fit: the sliding fit on the trials; biases: the force offset per trial;
     baseline and final: (position RMSE [m], heading RMSE [rad], loss [m^2]) of the
     windowed replay at the prior's and the fitted theta, on the held-out recording
     when there is one, else on the trials; traces: the replay for the report.
@@ -665,7 +739,7 @@ class PushedIdentification:
 
     fit: SlidingFit
     prior_theta: np.ndarray
-    bias_force_n: list
+    biases: list
     baseline: tuple[float, float, float]
     final: tuple[float, float, float]
     traces: dict
@@ -675,7 +749,7 @@ class PushedIdentification:
         from dataclasses import asdict
 
         return {"kind": "sliding", **self.fit.provenance(), "prior_theta": list(map(float, self.prior_theta)),
-                "force_bias_world_n": [list(map(float, b)) for b in self.bias_force_n],
+                "force_bias_world": [b.provenance() for b in self.biases],
                 "config": asdict(self.config)}
 
 

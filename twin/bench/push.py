@@ -19,7 +19,7 @@ from __future__ import annotations
 import tempfile
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,11 +58,11 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
             path = Path(tmp) / f"push_{seed}.mcap"
             truth = write_push(path, push)
             rec = read_recording(path)
-            bias = estimate_force_bias(rec, config)
             for mode, mass, free in (("m known", truth.mass_kg, (True, False, True)),
                                      ("m free", truth.mass_kg * prior_mass_factor, (True, True, True))):
                 t0 = time.perf_counter()
                 body = PlanarBody(push.half_extents_m, mass, _box_izz(mass, push.half_extents_m))
+                bias = estimate_force_bias(rec, config)
                 windows = push_windows(rec, body, config, bias)
                 fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=free)
                 rows.append({
@@ -73,7 +73,7 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
                     "izz_err_pct": 100 * (fit.theta[2] / truth.izz_kgm2 - 1),
                     "determined": fit.determined, "turn_deg": _net_yaw_deg(rec), "windows": fit.window_count,
                     "mu_qs_true_mass": quasi_static_friction(rec, body, config, bias, truth.mass_kg),
-                    "bias_err_n": float(np.linalg.norm(bias - np.asarray(push.force_bias_n))),
+                    "bias_err_n": float(np.max(np.linalg.norm(bias.force_n - np.asarray(push.force_bias_n), axis=1))),
                     "rmse_mm": 1e3 * fit.rmse_position_m, "seconds": time.perf_counter() - t0,
                 })
     print(f"prior mu = {mu_prior}; 'm free' starts from a mass prior = truth x {prior_mass_factor}; "
@@ -155,25 +155,43 @@ FREE = (True, False, True)
 """Real blocks: mu and I_zz fitted, the mass from the prior (unknown for every block; see bench push)."""
 
 
-def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction.png")) -> dict:
-    """Print per-trial friction, per-block spread, and predictive validity; save the figure."""
+def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
+    """Print per-trial friction, per-block spread, and predictive validity; save the figure
+    (docs/push_prediction.png, or docs/push_prediction_<blocks>.png for some of the blocks).
+
+    Beside each trial's quasi-static estimate, the same with the force offset
+    taken where it was before it came from pusher-away stretches: the median
+    force before the block first moves, with the pusher already resting on it.
+    """
     from pipelines.identify.sliding import (
-        SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
+        ForceBias, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
+        quasi_static_friction,
         replay_errors,
     )
 
+    known = tuple(b.folder for b in BLOCKS)
+    unknown = sorted(set(blocks) - set(known))
+    if unknown:
+        raise ValueError(f"push-real: unknown block(s) {unknown}, expected some of {list(known)}")
+    figure = Path("docs/push_prediction.png" if not blocks else f"docs/push_prediction_{'_'.join(blocks)}.png")
+    blocks = blocks or known
     bags = root / "ros2_mcap"
     if not bags.exists():
         raise RuntimeError(f"{bags}: the MIT pushing bags are not there")
     config = SlidingConfig()
     trials, summary, prediction = [], [], []
-    for block in BLOCKS:
+    for block in (b for b in BLOCKS if b.folder in blocks):
         body, mu_prior = block_prior(block)
+        resting = replace(config, pusher_clear_m=np.inf, lift_m=np.inf)  # the pusher is never away
+        preloaded = replace(config, preload_fraction=-np.inf)  # a resting pusher always preloads
         per_block = []
         for trial_dir in sorted((bags / block.folder).iterdir(), key=lambda p: int(p.name.rsplit("_", 1)[1])):
             t0 = time.perf_counter()
             rec = read_block_trial(trial_dir, block)
             bias = estimate_force_bias(rec, config)
+            rest = estimate_force_bias(rec, resting)
+            away = estimate_force_bias(rec, preloaded)
+            drift = ForceBias(np.r_[rest.t_s, away.t_s], np.r_[rest.force_n, away.force_n], "linear, rest to away")
             try:
                 windows = push_windows(rec, body, config, bias)
             except ValueError as exc:
@@ -185,7 +203,10 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
                 "mass": float(fit.theta[1]), "mu_m": float(fit.theta[0] * fit.theta[1]),
                 "determined": fit.determined, "windows": fit.window_count,
                 "mu_qs_prior_mass": quasi_static_friction(rec, body, config, bias, body.mass_kg),
-                "bias_n": bias, "rmse_mm": 1e3 * fit.rmse_position_m,
+                "mu_qs_resting_zero": quasi_static_friction(rec, body, config, rest, body.mass_kg),
+                "mu_qs_drift": quasi_static_friction(rec, body, config, drift, body.mass_kg),
+                "bias": bias, "rest_n": rest.force_n[0, :2], "away_n": away.force_n[-1, :2],
+                "rmse_mm": 1e3 * fit.rmse_position_m,
                 "rmse_heading_deg": float(np.degrees(fit.rmse_heading_rad)), "turn_deg": _net_yaw_deg(rec),
                 "seconds": time.perf_counter() - t0, "windows_data": windows, "theta": fit.theta,
             }
@@ -194,11 +215,15 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
         mus = np.array([r["mu"] for r in per_block])
         mums = np.array([r["mu_m"] for r in per_block])
         qs = np.array([r["mu_qs_prior_mass"] for r in per_block])
+        qs_resting = np.array([r["mu_qs_resting_zero"] for r in per_block])
+        qs_drift = np.array([r["mu_qs_drift"] for r in per_block])
         summary.append({
             "block": block.folder, "trials": len(per_block), "mu_mean": mus.mean(),
             "mu_cv_pct": 100 * mus.std(ddof=1) / mus.mean(),
             "mu_m_cv_pct": 100 * mums.std(ddof=1) / mums.mean(), "qs_mean": qs.mean(),
             "qs_cv_pct": 100 * qs.std(ddof=1) / qs.mean(), "prior_mass": body.mass_kg, "mu_prior": mu_prior,
+            "qs_resting_mean": qs_resting.mean(), "qs_resting_cv_pct": 100 * qs_resting.std(ddof=1) / qs_resting.mean(),
+            "qs_drift_mean": qs_drift.mean(), "qs_drift_cv_pct": 100 * qs_drift.std(ddof=1) / qs_drift.mean(),
         })
 
         # predictive validity: identified on the odd-numbered trials (the median of their estimates),
@@ -221,22 +246,32 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
 
     print("per trial (mass from the prior's material density unless 'data' says the pushes determined it):")
     print(f"{'block':14} {'trial':20} {'mu':>6} {'m kg':>6} {'mu*m':>6} {'data':>4} {'win':>3} {'mu qs':>6} "
-          f"{'turn deg':>8} {'rmse mm':>7} {'rmse deg':>8} {'s':>5}")
+          f"{'qs rest':>7} {'qs drift':>8} {'zeros':>5} {'drift N':>7} {'turn deg':>8} {'rmse mm':>7} "
+          f"{'rmse deg':>8} {'s':>5}")
     for r in trials:
         if "skipped" in r:
             print(f"{r['block']:14} {r['trial']:20} skipped: {r['skipped']}")
             continue
         flags = "".join("y" if d else "n" for d in r["determined"])
+        b = r["bias"]
+        drift = float(np.linalg.norm(r["rest_n"] - r["away_n"]))
+        zeros = f"{len(b.t_s)}{'r' if b.source.startswith('pusher resting') else 'a'}"
         print(f"{r['block']:14} {r['trial']:20} {r['mu']:6.3f} {r['mass']:6.3f} {r['mu_m']:6.3f} {flags:>4} "
-              f"{r['windows']:3d} {r['mu_qs_prior_mass']:6.3f} {r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} "
-              f"{r['rmse_heading_deg']:8.2f} {r['seconds']:5.1f}")
+              f"{r['windows']:3d} {r['mu_qs_prior_mass']:6.3f} {r['mu_qs_resting_zero']:7.3f} "
+              f"{r['mu_qs_drift']:8.3f} {zeros:>5} "
+              f"{drift:7.3f} {r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} {r['rmse_heading_deg']:8.2f} {r['seconds']:5.1f}")
+    print("zeros: how many force-offset zeros the fit used, 'a' with the pusher away, 'r' resting on the block before "
+          "the push; qs rest: the quasi-static mu with the resting offset; qs drift: linear from that to the "
+          "pusher-away zero after the push; drift N: their difference")
     print("\nper block:")
     print(f"{'block':14} {'trials':>6} {'prior m kg':>10} {'mu prior':>8} {'mu mean':>7} {'mu CV %':>7} "
-          f"{'mu*m CV %':>9} "
-          f"{'qs mean':>7} {'qs CV %':>7}")
+          f"{'mu*m CV %':>9} {'qs mean':>7} {'qs CV %':>7} {'qs rest mean':>12} {'qs rest CV %':>12} "
+          f"{'qs drift mean':>13} {'qs drift CV %':>13}")
     for s in summary:
         print(f"{s['block']:14} {s['trials']:6d} {s['prior_mass']:10.3f} {s['mu_prior']:8.3f} {s['mu_mean']:7.3f} "
-              f"{s['mu_cv_pct']:7.2f} {s['mu_m_cv_pct']:9.2f} {s['qs_mean']:7.3f} {s['qs_cv_pct']:7.2f}")
+              f"{s['mu_cv_pct']:7.2f} {s['mu_m_cv_pct']:9.2f} {s['qs_mean']:7.3f} {s['qs_cv_pct']:7.2f} "
+              f"{s['qs_resting_mean']:12.3f} {s['qs_resting_cv_pct']:12.2f} {s['qs_drift_mean']:13.3f} "
+              f"{s['qs_drift_cv_pct']:13.2f}")
     print("\npredictive validity: fitted on odd-numbered trials, predicting the others "
           f"({config.window_s} s windows from measured states, measured force and contact):")
     print(f"{'block':14} {'trial':20} {'mu fit':>6} {'pos mm':>7} {'prior mm':>8} {'head deg':>8} {'prior deg':>9}")
@@ -244,12 +279,67 @@ def bench_push_real(root: Path = DATA, figure: Path = Path("docs/push_prediction
         print(f"{p['block']:14} {p['trial']:20} {p['mu_fit']:6.3f} {p['pos_mm']:7.2f} {p['pos_prior_mm']:8.2f} "
               f"{p['heading_deg']:8.2f} {p['heading_prior_deg']:9.2f}")
     _plot_prediction(prediction, figure)
-    print(f"\nfigure: {figure}\n")
-    mit = bench_push_mit(root)
-    return {"trials": trials, "summary": summary, "prediction": prediction, "mit": mit}
+    print(f"\nfigure: {figure}")
+    return {"trials": trials, "summary": summary, "prediction": prediction}
 
 
-def _plot_prediction(prediction: list[dict], figure: Path) -> None:
+def bench_push_offsets(root: Path = DATA) -> list[dict]:
+    """Quasi-static friction of every block bag under three force-offset models, without the Newton fits.
+
+    resting: the median force before the block first moves, the pusher resting on
+    it (a preload, if any, counts as offset); away: the zero after the push, the
+    pusher lifted; drift: linear in time from the resting zero to the away zero.
+    The last column names the one the fits use (estimate_force_bias). A spread that falls from one model to another
+    points at the offset, not the friction, as what varies between trials.
+    """
+    from pipelines.identify.sliding import ForceBias, SlidingConfig, estimate_force_bias, quasi_static_friction
+
+    config = SlidingConfig()
+    resting_config = replace(config, pusher_clear_m=np.inf, lift_m=np.inf)  # the pusher is never away
+    away_config = replace(config, preload_fraction=-np.inf)  # a resting pusher always preloads
+    rows = []
+    for block in BLOCKS:
+        body, _ = block_prior(block)
+        for trial_dir in sorted((root / "ros2_mcap" / block.folder).iterdir(),
+                                key=lambda p: int(p.name.rsplit("_", 1)[1])):
+            rec = read_block_trial(trial_dir, block)
+            chosen = estimate_force_bias(rec, config)
+            away = estimate_force_bias(rec, away_config)
+            rest = estimate_force_bias(rec, resting_config)
+            models = {"resting": rest, "away": away,
+                      "drift": ForceBias(np.r_[rest.t_s, away.t_s], np.r_[rest.force_n, away.force_n], "drift")}
+            row = {"block": block.folder, "trial": trial_dir.name, "zeros": chosen.source,
+                   "offset_change_n": (away.force_n[-1, :2] - rest.force_n[0, :2]).tolist()}
+            try:
+                row.update({k: quasi_static_friction(rec, body, config, b, body.mass_kg) for k, b in models.items()})
+            except ValueError as exc:
+                row["skipped"] = str(exc).split(": ", 1)[1]
+            rows.append(row)
+    print("quasi-static mu (median pushing force over m g, prior mass) under three force-offset models:")
+    print(f"{'block':14} {'trial':20} {'resting':>7} {'away':>7} {'drift':>7}  offset away - resting, world x y [N]; "
+          "the offset the fit uses (estimate_force_bias)")
+    for r in rows:
+        change = "({:+.3f}, {:+.3f})".format(*r["offset_change_n"])
+        if "skipped" in r:
+            print(f"{r['block']:14} {r['trial']:20} skipped: {r['skipped']}  {change}")
+            continue
+        print(f"{r['block']:14} {r['trial']:20} {r['resting']:7.3f} {r['away']:7.3f} {r['drift']:7.3f}  {change}; "
+              f"{r['zeros']}")
+    print(f"\n{'block':14} {'trials':>6} " + " ".join(f"{m + ' mean':>12} {m + ' CV %':>12}"
+                                                       for m in ("resting", "away", "drift")))
+    for block in BLOCKS:
+        got = [r for r in rows if r["block"] == block.folder and "skipped" not in r]
+        cells = []
+        for m in ("resting", "away", "drift"):
+            v = np.array([r[m] for r in got])
+            cells.append(f"{v.mean():12.3f} {100 * v.std(ddof=1) / v.mean():12.2f}")
+        print(f"{block.folder:14} {len(got):6d} " + " ".join(cells))
+    return rows
+
+
+def _plot_prediction(prediction: list[dict], figure: Path,
+                     title: str = "Held-out MIT block pushes: object motion predicted from measured pusher force "
+                                  "and contact point") -> None:
     """Bars of position and heading RMSE (identified vs prior friction) and one trial's windows overlaid."""
     import matplotlib
 
@@ -279,67 +369,7 @@ def _plot_prediction(prediction: list[dict], figure: Path) -> None:
     ax.set_ylabel("y [mm]")
     ax.axis("equal")
     ax.legend(fontsize=8)
-    fig.suptitle("Held-out MIT block pushes: object motion predicted from measured pusher force and contact point")
+    fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(figure, dpi=110)
     plt.close(fig)
-
-
-def read_mit_json_trial(path: Path, half_height_m: float):
-    """A MIT pushing-dataset JSON trial as a Recording (pose, force and tip in the robot frame).
-
-    Each key holds [t_s, x, y, yaw] (poses) or [t_s, F_x, F_y, tau_z] (the F/T reading
-    in the robot frame, the force ON the probe: negated here). mit-push README, section 2.
-    """
-    import json
-
-    from scipy.spatial.transform import Rotation
-
-    from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack
-
-    d = json.loads(Path(path).read_text())
-    obj, ft, tip = (np.asarray(d[k], dtype=float) for k in ("object_pose", "ft_wrench", "tip_pose"))
-    quat = Rotation.from_euler("z", obj[:, 3:4]).as_quat()
-    pose = PoseTrack(obj[:, 0], np.c_[obj[:, 1:3], np.full(len(obj), half_height_m)], quat, "world", "object",
-                     "object_pose")
-    zeros = np.zeros(len(ft))
-    raw = WrenchTrack(ft[:, 0], np.c_[ft[:, 1:3], zeros], np.c_[zeros, zeros, ft[:, 3]], "ft_wrench", "world")
-    applied = WrenchTrack(ft[:, 0], -raw.force, -raw.torque, "ft_wrench", "world")
-    contact = PointTrack(tip[:, 0], np.c_[tip[:, 1:3], np.full(len(tip), half_height_m)], "world", "tip_pose")
-    t0, t1 = min(obj[0, 0], ft[0, 0]), max(obj[-1, 0], ft[-1, 0])
-    return Recording(Path(path), pose, applied, raw, contact, None, float(t1 - t0))
-
-
-def bench_push_mit(root: Path = DATA) -> list[dict]:
-    """The MIT dataset's JSON trial (hex on plywood, mass known): mu fitted beside the quasi-static estimate."""
-    import json
-
-    from pipelines.identify.sliding import (
-        PlanarBody, SlidingConfig, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
-    )
-
-    objects = json.loads((root / "objects.json").read_text())["objects"]
-    config = SlidingConfig()
-    rows = []
-    for path in sorted((root / "mit_push_dataset" / "json").glob("*.json")):
-        shape = path.name.split("shape=")[1].split("_")[0]
-        spec = objects[shape]
-        r = spec["outline"]["circumradius"]
-        # the hexagon's bounding box as the support face (its grid slightly overstates the turning friction)
-        half = (r, r * np.sqrt(3) / 2, spec["thickness_m_shape_db"] / 2)
-        body = PlanarBody(half, spec["mass_kg"], spec["moment_of_inertia_kgm2"])
-        rec = read_mit_json_trial(path, half[2])
-        bias = estimate_force_bias(rec, config)
-        windows = push_windows(rec, body, config, bias)
-        fit = identify_sliding(windows, body, config, mu_prior=0.35, free=(True, False, False))
-        rows.append({"trial": path.name, "mass": spec["mass_kg"], "mu": float(fit.theta[0]),
-                     "mu_std": float(fit.std[0]),
-                     "mu_qs": quasi_static_friction(rec, body, config, bias, spec["mass_kg"]),
-                     "windows": fit.window_count, "rmse_mm": 1e3 * fit.rmse_position_m,
-                     "rmse_deg": float(np.degrees(fit.rmse_heading_rad)), "turn_deg": _net_yaw_deg(rec)})
-    print("MIT pushing dataset, JSON trial(s), mass and I_zz known (objects.json):")
-    print(f"{'trial':75} {'m kg':>6} {'mu':>6} {'mu qs':>6} {'win':>3} {'turn deg':>8} {'rmse mm':>7} {'rmse deg':>8}")
-    for r in rows:
-        print(f"{r['trial']:75} {r['mass']:6.3f} {r['mu']:6.3f} {r['mu_qs']:6.3f} {r['windows']:3d} "
-              f"{r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} {r['rmse_deg']:8.2f}")
-    return rows

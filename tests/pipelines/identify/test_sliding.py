@@ -8,7 +8,7 @@ import pytest
 from pipelines.identify.sliding import (
     PlanarBody, PushWindows, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
 )
-from pipelines.logs import PoseTrack, Recording, WrenchTrack, read_recording
+from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack, read_recording
 from pipelines.synth.push import PushConfig, write_push
 
 HALF = (0.05, 0.05, 0.005)
@@ -66,10 +66,55 @@ def push_recording(tmp_path_factory):
 
 
 def test_force_bias_read_from_the_quiet_start(push_recording):
-    """The un-zeroed sensor's offset is recovered from before the push, within its noise."""
+    """The un-zeroed sensor's offset is recovered from before the push (the pusher still clear), within its noise."""
     rec, config = push_recording
     bias = estimate_force_bias(rec, SlidingConfig())
-    np.testing.assert_allclose(bias, config.force_bias_n, atol=0.03)
+    assert bias.source == "pusher away"
+    np.testing.assert_allclose(bias.at([rec.pose.t_s[0], rec.pose.t_s[-1]]), [config.force_bias_n] * 2, atol=0.03)
+
+
+def _rested_push(preload_n: float, drift_n: float, lift_at_end: bool) -> Recording:
+    """A block pushed along +x from 2 to 4 s by a pusher that rests on it from the start, pressing
+    `preload_n` while friction holds; the sensor offset grows by `drift_n` over the 8 s."""
+    t = np.arange(0.0, 8.0, 0.01)
+    x = np.interp(t, [0.0, 2.0, 4.0, 8.0], [0.0, 0.0, 0.1, 0.1])
+    pose = PoseTrack(t, np.c_[x, np.zeros((len(t), 2))], np.tile([0, 0, 0, 1.0], (len(t), 1)), "world", "b", "/b")
+    pushing = (t >= 2.0) & (t <= 4.0)
+    offset = np.c_[0.2 + drift_n * t / 8.0, np.full(len(t), -0.1), np.zeros(len(t))]
+    applied = np.zeros((len(t), 3))
+    applied[t < 2.0, 0] = preload_n
+    applied[pushing, 0] = 1.5
+    measured = WrenchTrack(t, applied + offset, np.zeros((len(t), 3)), "/w", "world")
+    lifted = t > 4.5 if lift_at_end else np.zeros(len(t), dtype=bool)
+    tip = np.c_[x - 0.055, np.zeros(len(t)), np.where(lifted, 0.05, 0.0)]
+    return Recording("rested.mcap", pose, measured, measured, PointTrack(t, tip, "world", "/tip"), None, 8.0)
+
+
+def test_force_bias_skips_a_preload_and_follows_a_drift():
+    """A pusher resting on the block before the push: a preload along the push sends the offset to the
+    zero after the pusher lifts off; without one the resting stretch is the offset. Zeros with the
+    pusher clear on both sides give a linear drift."""
+    rested = estimate_force_bias(_rested_push(0.3, 0.0, lift_at_end=True), SlidingConfig())
+    assert rested.source == "pusher away after a preload" and len(rested.t_s) == 1
+    np.testing.assert_allclose(rested.at([0.0, 3.0]), [[0.2, -0.1, 0.0]] * 2, atol=1e-9)
+
+    unloaded = estimate_force_bias(_rested_push(0.0, 0.16, lift_at_end=True), SlidingConfig())
+    assert unloaded.source == "pusher resting before the push"
+    np.testing.assert_allclose(unloaded.at([3.0])[0, 0], 0.2 + 0.02 * 0.85, atol=0.01)  # median over 0-1.7 s
+
+    never_away = estimate_force_bias(_rested_push(0.3, 0.0, lift_at_end=False), SlidingConfig())
+    assert never_away.source == "pusher resting before the push"  # no zero after: a preload cannot be seen
+    np.testing.assert_allclose(never_away.at([3.0])[0], [0.5, -0.1, 0.0], atol=1e-9)
+
+    clear = _rested_push(0.0, 0.16, lift_at_end=True)
+    tip = clear.contact.position.copy()
+    tip[clear.contact.t_s < 1.0, 0] -= 0.2  # clear of the block until 1 s
+    clear = Recording(clear.path, clear.pose, clear.wrench, clear.wrench_raw,
+                      PointTrack(clear.contact.t_s, tip, "world", "/tip"), None, 8.0)
+    drifting = estimate_force_bias(clear, SlidingConfig())
+    assert len(drifting.t_s) == 2
+    # the offset at 3 s, mid-push, lies on the line between the zeros (0.2 + 0.02 t)
+    np.testing.assert_allclose(drifting.at([3.0])[0, 0], 0.2 + 0.02 * 3.0, atol=0.01)
 
 
 def test_friction_recovered_from_a_turning_push(push_recording):
