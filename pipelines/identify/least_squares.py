@@ -26,7 +26,7 @@ from scipy.spatial.transform import Slerp
 
 from assets import Inertial, Pose
 
-from .noise import estimate_noise_levels
+from .noise import NoiseLevels, estimate_noise_levels
 from .windows import angular_velocity, central_derivative, lowpass, smoothed_pose_grid
 
 GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
@@ -100,7 +100,7 @@ class NewtonEulerRows:
 
 def newton_euler_rows(
     pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque, *,
-    cutoff_hz: float = 12.0, t_begin_s: float | None = None,
+    cutoff_hz: float = 12.0, t_begin_s: float | None = None, noise: NoiseLevels | None = None,
 ) -> NewtonEulerRows:
     """Regressor and measured wrench of a recording; wrench in world axes about the tracked origin.
 
@@ -111,9 +111,11 @@ def newton_euler_rows(
     the turning gravity: up to 10 Hz for wrist turns of 5 Hz). The kinematics
     come from poses smoothed at 2.5 x `cutoff_hz`, above those products and below
     the tracker's noise band. Rows within 0.1 s of either stream's ends are
-    dropped (filter edge effects).
+    dropped (filter edge effects). `noise` weights the rows; estimated from the recording when not given.
     """
-    noise = estimate_noise_levels(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque)
+    if noise is None:
+        noise = estimate_noise_levels(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force,
+                                      wrench_torque)
     t, pos, rot = smoothed_pose_grid(pose_t_s, np.asarray(pose_position), np.asarray(pose_quat_xyzw),
                                      2.5 * cutoff_hz)
     dt = t[1] - t[0]
@@ -162,13 +164,13 @@ def identify_least_squares(
     """
     from scipy.spatial.transform import Rotation
 
+    noise = estimate_noise_levels(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque)
     rows = newton_euler_rows(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque,
-                             cutoff_hz=cutoff_hz, t_begin_s=t_begin_s)
+                             cutoff_hz=cutoff_hz, t_begin_s=t_begin_s, noise=noise)
     n = len(rows.t_s)
     As = (rows.A * rows.scale[None, :, None]).reshape(-1, 10)
     bs = (rows.b * rows.scale).reshape(-1)
 
-    noise = estimate_noise_levels(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, wrench_force, wrench_torque)
     rng = np.random.default_rng(seed)
     noise_AA, noise_Ab = np.zeros((10, 10)), np.zeros(10)
     for _ in range(noise_draws):
@@ -176,7 +178,7 @@ def identify_least_squares(
         jitter = Rotation.from_rotvec(rng.normal(0, noise.rotation_rad, (len(position), 3)))
         quat = (Rotation.from_quat(pose_quat_xyzw) * jitter).as_quat()
         renoised = newton_euler_rows(pose_t_s, position, quat, wrench_t_s, wrench_force, wrench_torque,
-                                     cutoff_hz=cutoff_hz, t_begin_s=t_begin_s)
+                                     cutoff_hz=cutoff_hz, t_begin_s=t_begin_s, noise=noise)
         dA = ((renoised.A - rows.A) * rows.scale[None, :, None]).reshape(-1, 10)
         db = ((renoised.b - rows.b) * rows.scale).reshape(-1)
         noise_AA += dA.T @ dA / noise_draws
