@@ -71,7 +71,7 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
                     "mu_m_err_pct": 100 * (fit.theta[0] * fit.theta[1] / (truth.mu * truth.mass_kg) - 1),
                     "mass_err_pct": 100 * (fit.theta[1] / truth.mass_kg - 1),
                     "izz_err_pct": 100 * (fit.theta[2] / truth.izz_kgm2 - 1),
-                    "determined": fit.determined, "turn_deg": _net_yaw_deg(rec), "windows": fit.window_count,
+                    "determined": fit.determined, "turn_deg": net_yaw_deg(rec), "windows": fit.window_count,
                     "mu_qs_true_mass": quasi_static_friction(rec, body, config, bias, truth.mass_kg),
                     "bias_err_n": float(np.max(np.linalg.norm(bias.force_n - np.asarray(push.force_bias_n), axis=1))),
                     "rmse_mm": 1e3 * fit.rmse_position_m, "seconds": time.perf_counter() - t0,
@@ -95,7 +95,7 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
     return rows
 
 
-def _net_yaw_deg(rec) -> float:
+def net_yaw_deg(rec) -> float:
     from scipy.spatial.transform import Rotation
 
     x = Rotation.from_quat(rec.pose.quat_xyzw).apply([1.0, 0.0, 0.0])
@@ -207,7 +207,7 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
                 "mu_qs_drift": quasi_static_friction(rec, body, config, drift, body.mass_kg),
                 "bias": bias, "rest_n": rest.force_n[0, :2], "away_n": away.force_n[-1, :2],
                 "rmse_mm": 1e3 * fit.rmse_position_m,
-                "rmse_heading_deg": float(np.degrees(fit.rmse_heading_rad)), "turn_deg": _net_yaw_deg(rec),
+                "rmse_heading_deg": float(np.degrees(fit.rmse_heading_rad)), "turn_deg": net_yaw_deg(rec),
                 "seconds": time.perf_counter() - t0, "windows_data": windows, "theta": fit.theta,
             }
             trials.append(row)

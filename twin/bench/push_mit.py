@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.bench.push import DATA, _net_yaw_deg
+from twin.bench.push import DATA, net_yaw_deg
 
 MIT_CONFIG = dict(dt_s=1e-4, moving_speed_m_s=1e-3)
 """SlidingConfig changes for the dataset's slow pushes: step [s] and the speed a window must exceed [m/s]."""
@@ -75,7 +75,7 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
         rec = read_push_trial(path)
         bias = estimate_force_bias(rec, config)
         row = {"trial": path.name, "pair": f"{name.shape}/{name.surface}", "name": name, "mass": body.mass_kg,
-               "turn_deg": _net_yaw_deg(rec),
+               "turn_deg": net_yaw_deg(rec),
                "bias_n": float(np.max(np.linalg.norm(bias.force_n[:, :2], axis=1), initial=0.0)),
                "bias_source": bias.source}
         try:
