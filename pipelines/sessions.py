@@ -87,6 +87,12 @@ class SessionsConfig:
     observations (symmetric objects); each is refined and the smallest consistent intersection kept."""
     max_candidates: int = 6
     """At most this many such poses are refined and compared."""
+    support_weight: float = 0.2
+    """Weight of the resting contact, as a fraction of the observed points' total weight; 0 leaves it out.
+    Each session's object rested on its support plane, so that plane, carried into the other session's world,
+    touches the other session's observed surface where the object stood (the face of their convex hull that
+    the downward ray from the centre of mass leaves through). A flat tool turned over shares only its rim
+    with the first session, and the rim alone leaves its pitch 0.5 deg loose; its contacts pin it."""
     seed: int = 0
     """Seed of the point subsampling and the random starts."""
 
@@ -221,7 +227,8 @@ def register_session(
 
     screen = subsample(config.screen_points)
     screened = sorted(
-        ((*_refine(a, b, R0, t0, *screen, pivot, scale, config.normal_agreement, 30), label)
+        ((*_refine(a, b, R0, t0, *screen, pivot, scale, config.normal_agreement,
+                    config.support_weight, 30), label)
          for label, R0, t0 in starts),
         key=lambda s: s[2],
     )
@@ -233,7 +240,8 @@ def register_session(
         if all(_angle_deg(R, other[0]) > 5.0 for other in candidates):
             candidates.append((R, t, label))
     final = subsample(config.points)
-    refined = [(*_refine(a, b, R, t, *final, pivot, scale, config.normal_agreement, 60), label)
+    refined = [(*_refine(a, b, R, t, *final, pivot, scale, config.normal_agreement,
+                       config.support_weight, 60), label)
                for R, t, label in candidates]
     best_cost = min(r[2] for r in refined)
     checked = [(_check(a, b, R, t, tau, config.normal_agreement), cost, label) for R, t, cost, label in refined]
@@ -267,11 +275,15 @@ class _Side:
     face_observed: np.ndarray  # [faces] bool
     points: np.ndarray  # observed vertices [m], [n, 3]
     normals: np.ndarray  # their outward normals, [n, 3]
+    hull: np.ndarray  # the observed vertices' convex hull: per face (outward normal [3], offset [m]), [f, 4]
+    hull_corners: np.ndarray  # its faces' corner points [m], [f, 3, 3]
+    plane: tuple[np.ndarray, float]  # the support plane (up normal, offset [m])
+    centre: np.ndarray  # the solid's centre of mass [m]
 
     @staticmethod
     def of(rec: Reconstruction) -> "_Side":
         import open3d as o3d
-        from scipy.spatial import cKDTree
+        from scipy.spatial import ConvexHull, cKDTree
 
         mesh = rec.mesh
         seen = np.asarray(rec.observed_points, float)
@@ -287,8 +299,23 @@ class _Side:
         scene = o3d.t.geometry.RaycastingScene()
         scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
                             o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
-        return _Side(scene, np.asarray(mesh.face_normals), near[mesh.faces].all(axis=1),
-                     np.asarray(mesh.vertices)[near], np.asarray(mesh.vertex_normals)[near])
+        points = np.asarray(mesh.vertices)[near]
+        hull = ConvexHull(points) if len(points) >= 4 else None
+        return _Side(scene, np.asarray(mesh.face_normals), near[mesh.faces].all(axis=1), points,
+                     np.asarray(mesh.vertex_normals)[near],
+                     hull.equations if hull is not None else np.empty((0, 4)),
+                     points[hull.simplices] if hull is not None else np.empty((0, 3, 3)),
+                     (np.asarray(normal, float), float(offset)), np.asarray(mesh.center_mass))
+
+    def contact(self, down: np.ndarray) -> np.ndarray:
+        """The corners [m] of the hull face this side's object would rest on if `down` (unit, this side's world)
+        pointed down: the face the ray from the centre of mass along `down` leaves through."""
+        if not len(self.hull):
+            return np.empty((0, 3))
+        rate = self.hull[:, :3] @ down
+        reach = np.where(rate > 1e-9, -(self.hull[:, :3] @ self.centre + self.hull[:, 3]) / np.maximum(rate, 1e-9),
+                         np.inf)
+        return self.hull_corners[int(np.argmin(reach))]
 
     def distances_to(
         self, other: "_Side", R: np.ndarray, t: np.ndarray, index: np.ndarray, agreement: float
@@ -342,27 +369,41 @@ def _intersection_volume(first: "trimesh.Trimesh", later: "trimesh.Trimesh", T: 
 
 def _refine(
     a: _Side, b: _Side, R: np.ndarray, t: np.ndarray, ia: np.ndarray, ib: np.ndarray, pivot: np.ndarray,
-    tau: float, agreement: float, iterations: int,
+    tau: float, agreement: float, support_weight: float, iterations: int,
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Levenberg-Marquardt on the robust (soft-L1, scale `tau` [m]) cost of both directions' residuals.
+    """Levenberg-Marquardt on the robust (soft-L1, scale `tau` [m]) cost of both directions' residuals, plus
+    the resting contacts' heights over the other session's support plane (quadratic, `support_weight`).
 
     (R, t) maps `b`'s world to `a`'s; updates rotate about `pivot` [m] (in `a`'s world). Returns the refined
-    (R, t) and the mean robust cost [m^2].
+    (R, t) and the mean cost [m^2].
     """
     from scipy.spatial.transform import Rotation
+
+    na, oa = a.plane
+    nb, ob = b.plane
+    contact_weight = support_weight * (len(ia) + len(ib)) / 6.0  # 3 corners a side
 
     def evaluate(R, t):
         r_b, _, g_b = b.distances_to(a, R, t, ib, agreement)
         q_b = b.points[ib] @ R.T + t
         r_a, _, g_a = a.distances_to(b, R.T, -R.T @ t, ia, agreement)
         g_a = g_a @ R.T  # into a's world, where the pose change acts
+        # where b stood, on b's plane, are a's observed points that touch b's plane carried into a's world
+        up_b = R @ nb
+        c_a = a.contact(-up_b)
+        c_b = b.contact(-R.T @ na) @ R.T + t
         # a's points move by the inverse of the change: their residuals change with the opposite sign
         J = np.vstack([np.hstack([np.cross(q_b - pivot, g_b), g_b]),
-                       -np.hstack([np.cross(a.points[ia] - pivot, g_a), g_a])])
+                       -np.hstack([np.cross(a.points[ia] - pivot, g_a), g_a]),
+                       np.hstack([np.cross(c_b - pivot, na), np.broadcast_to(na, c_b.shape)]),
+                       -np.hstack([np.cross(c_a - pivot, up_b), np.broadcast_to(up_b, c_a.shape)])])
         r = np.concatenate([r_b, r_a])
         z = (r / tau) ** 2
-        cost = float(np.mean(2.0 * tau**2 * (np.sqrt(1.0 + z) - 1.0)))
-        return r, J, 1.0 / np.sqrt(1.0 + z), cost
+        contact = np.concatenate([c_b @ na + oa, (c_a - t) @ up_b + ob])
+        cost = float((np.sum(2.0 * tau**2 * (np.sqrt(1.0 + z) - 1.0)) + contact_weight * np.sum(contact**2))
+                     / len(r))
+        w = np.concatenate([1.0 / np.sqrt(1.0 + z), np.full(len(contact), contact_weight)])
+        return np.concatenate([r, contact]), J, w, cost
 
     r, J, w, cost = evaluate(R, t)
     damping = 1e-3

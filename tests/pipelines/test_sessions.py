@@ -16,9 +16,10 @@ FAST = RenderConfig(width=320, height=240, fx=300.0, fy=300.0, view_count=12)
 
 
 def _bridge() -> trimesh.Trimesh:
-    """An 8 x 3 x 1 cm plank on a 2 x 3 x 2 cm block at one end: no camera sees under the 6 cm overhang."""
+    """An 8 x 3 x 1 cm plank on a 2 x 3 x 2 cm block off its middle: no camera sees under the 4 and 2 cm
+    overhangs. The block stays under the centre of mass, so the bridge rests on it as a real object would."""
     block = trimesh.creation.box((0.02, 0.03, 0.02))
-    block.apply_translation((-0.03, 0.0, 0.01))
+    block.apply_translation((-0.01, 0.0, 0.01))
     plank = trimesh.creation.box((0.08, 0.03, 0.01))
     plank.apply_translation((0.0, 0.0, 0.025))
     return trimesh.boolean.union([block, plank], engine="manifold")
