@@ -14,6 +14,8 @@ Method (each step a private function below):
    hidden behind surfaces (the object's interior, its unseen underside) or
    never observed; a projection pass counts, for each, the views in which it
    lies behind the measured surface: those are solid, the rest empty.
+   Optionally, pixels on depth discontinuities (silhouettes) are left out of
+   the fusion: sampled at pixel centres, they erode every silhouette.
 3. Close. The field is intersected with the half-space a few voxels above the
    support plane, so the table drops away and the object's footprint is closed
    by a flat cap; marching cubes on this closed field gives closed surfaces.
@@ -89,6 +91,14 @@ class ReconstructConfig:
     the surface: a 3 cm cube under 2 mm noise lost 8.7 % of its volume at 5 voxels of 0.5 mm, 0.3 % at 10."""
     depth_trunc_m: float = 3.0
     """Depth beyond this is ignored [m]."""
+    silhouette_jump_truncations: float = 0.0
+    """Pixels whose 3x3 neighbourhood spans more than this many truncation distances in depth (silhouettes)
+    are left out of the fusion; 0 keeps them. Sampled at pixel centres, silhouettes erode the surface by
+    about 0.05 mm (3.6 % of a 5 mm bar lying on the table), but the table beside a round object's silhouette
+    is also what carves the wedge under it (a 5 cm ball: -0.3 % with them, +0.9 % without). One session
+    keeps them; merged sessions (`SessionsConfig`) drop them at 2: their intersection keeps the inner of
+    the surfaces everywhere, so erosion adds up, while the other session carves the wedges. Twice the
+    truncation keeps noise (9 samples span about 3 sigmas) from dropping pixels on smooth surfaces."""
     use_masks: bool = True
     """Segment with the scan's masks when every frame has one; else by plane and clustering."""
     segmentation_stride: int = 4
@@ -657,10 +667,11 @@ def _fuse(
     buf, ok = vbg.hashmap().activate(block_coords)
     if not ok.numpy().all():
         raise ReconstructError("could not allocate the TSDF voxel blocks")
+    jump_m = config.silhouette_jump_truncations * trunc_m
     for view in views:
         vbg.integrate(
             block_coords,
-            o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(view.depth_m))),
+            o3d.t.geometry.Image(o3c.Tensor(_silhouettes_dropped(view.depth_m, jump_m))),
             o3c.Tensor(view.K),
             o3c.Tensor(np.linalg.inv(view.T_world_camera)),
             depth_scale=1.0,
@@ -676,6 +687,27 @@ def _fuse(
     grid.tsdf = _dense(vbg.attribute("tsdf").numpy(), buf_indices)
     grid.weight = _dense(vbg.attribute("weight").numpy(), buf_indices)
     return grid
+
+
+def _silhouettes_dropped(depth_m: np.ndarray, jump_m: float) -> np.ndarray:
+    """The depth image [m] without the pixels whose 3x3 neighbourhood spans more than `jump_m` in depth
+    (0: no measurement); `jump_m` 0 keeps every pixel.
+
+    Integration samples each voxel's depth at the centre of the pixel it falls in, so near a silhouette a
+    voxel up to half a pixel inside the object can take the background's depth (a full truncation of free
+    space) and one just outside can take the object's. The first outweighs the views that see the voxel
+    just inside: every silhouette eroded, 0.05 mm all round on noise-free scans, 3-4 % of a 5 mm bar's
+    volume. Without these pixels, the space beside an edge is decided by the views that see it away from
+    their silhouettes (the bar: -3.6 % -> -0.3 %, noise-free).
+    """
+    from scipy import ndimage
+
+    if jump_m <= 0:
+        return np.ascontiguousarray(depth_m, dtype=np.float32)
+    valid = depth_m > 0
+    nearest = ndimage.minimum_filter(np.where(valid, depth_m, np.inf), size=3, mode="nearest")
+    farthest = ndimage.maximum_filter(np.where(valid, depth_m, -np.inf), size=3, mode="nearest")
+    return np.ascontiguousarray(np.where(farthest - nearest > jump_m, 0.0, depth_m), dtype=np.float32)
 
 
 def _dense(values: np.ndarray, buf_indices: np.ndarray) -> np.ndarray:

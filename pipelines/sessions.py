@@ -63,8 +63,10 @@ class SessionError(ReconstructError):
 class SessionsConfig:
     """Registration and merging of scan sessions; each session is reconstructed with `reconstruct`."""
 
-    reconstruct: ReconstructConfig = ReconstructConfig()
-    """Settings for every session's own reconstruction."""
+    reconstruct: ReconstructConfig = ReconstructConfig(silhouette_jump_truncations=2.0)
+    """Settings for every session's own reconstruction. Silhouette pixels are left out of the fusion: each
+    erodes the surface by about 0.05 mm, which the intersection keeps wherever either session did (a 5 mm
+    bar, intersected at the exact pose: -3.4 % with them, -1.8 % without)."""
     points: int = 3000
     """Observed points per session in the final refinement."""
     screen_points: int = 400

@@ -150,6 +150,8 @@ class Bench:
     """A subset that runs in about a minute (reconstruct)."""
     sessions_only: bool = False
     """reconstruct: only the objects also scanned a second time, turned over (the two-session columns)."""
+    names: tuple[str, ...] = ()
+    """reconstruct: objects to run, named as in its table (e.g. "Allen Key" "cube 30 cm"; default all)."""
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
     concealed: int = 40
@@ -297,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
             elif command.what == "reconstruct":
                 from twin.bench.reconstruct import bench_reconstruct
 
-                bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only)
+                bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only, names=command.names)
             elif command.what == "push":
                 from twin.bench.push import bench_push
 

@@ -62,7 +62,7 @@ class _Case:
 
 
 def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_root: Path = DATA_ROOT,
-                      sessions_only: bool = False) -> dict:
+                      sessions_only: bool = False, names: tuple[str, ...] = ()) -> dict:
     """Run the synthetic and the real benchmarks; print tables; write results.json and pictures to `out_dir`.
 
     Args:
@@ -71,15 +71,22 @@ def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_roo
             (reconstruct-quick for the subset).
         data_root: the shared data folder (workshop-tools/, mit-push/, rgbd/).
         sessions_only: only the objects scanned twice, at the two noise levels, and no Kinect frames.
+        names: only these objects (as named in the table), and no Kinect frames; empty: all.
 
     Returns:
         The results, as written to results.json.
     """
-    suffix = "-quick" if quick else "-sessions" if sessions_only else ""
+    suffix = "-quick" if quick else "-sessions" if sessions_only else "-some" if names else ""
     out_dir = Path(out_dir or f"out/bench/reconstruct{suffix}")
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     cases = [c for c in _cases(data_root, quick) if c.sessions or not sessions_only]
+    if names:
+        unknown = sorted(set(names) - {c.name for c in cases})
+        if unknown:
+            raise ValueError(f"bench reconstruct: no object named {', '.join(map(repr, unknown))} in this run; "
+                             f"choose from {', '.join(repr(c.name) for c in cases)}")
+        cases = [c for c in cases if c.name in names]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases:
@@ -90,7 +97,7 @@ def bench_reconstruct(quick: bool = False, out_dir: Path | None = None, data_roo
                 _print_row(rows[-1], header=len(rows) == 1)
     summary = _summarise(rows)
     _print_summary(summary)
-    real = {} if sessions_only else _run_kinect(data_root, out_dir, quick)
+    real = {} if sessions_only or names else _run_kinect(data_root, out_dir, quick)
     results = {"synthetic": rows, "summary": summary, "kinect": real, "total_s": time.perf_counter() - t0,
                "quick": quick}
     (out_dir / "results.json").write_text(json.dumps(results, indent=1, default=_plain))
@@ -272,7 +279,7 @@ def _run_case(case: _Case, truth, noise: str, tmp: Path, decompose: bool) -> dic
         faces=len(mesh.faces),
     )
     if case.sessions and noise != REFERENCE:
-        row.update(_second_session(truth, rec, root, _render_config(framing, noise), case.name))
+        row.update(_second_session(truth, root, _render_config(framing, noise), case.name))
     if decompose:
         t1 = time.perf_counter()
         parts = run_decompose(mesh, DecomposeConfig(), cache_dir=None)
@@ -285,14 +292,14 @@ def _run_case(case: _Case, truth, noise: str, tmp: Path, decompose: bool) -> dic
     return row
 
 
-def _second_session(truth, first, root: Path, render, name: str) -> dict:
-    """Render the object turned over (a pose change the merge is not told), merge with the first session's
-    reconstruction, and measure the merged mesh and the registration against the truth."""
+def _second_session(truth, root: Path, render, name: str) -> dict:
+    """Render the object turned over (a pose change the merge is not told), reconstruct both sessions and merge
+    them, and measure the merged mesh and the registration against the truth."""
     from scipy.spatial.transform import Rotation
 
     from pipelines.reconstruct import reconstruct
     from pipelines.scan import read_scan
-    from pipelines.sessions import SessionError, merge_reconstructions
+    from pipelines.sessions import SessionError, SessionsConfig, merge_reconstructions
     from pipelines.synth.render import render_scan
 
     import trimesh
@@ -301,7 +308,8 @@ def _second_session(truth, first, root: Path, render, name: str) -> dict:
     second_root = root.with_name(root.name + "-turned")
     render_scan(turned, second_root, render, np.random.default_rng(1), name)
     t0 = time.perf_counter()
-    second = reconstruct(read_scan(second_root))
+    # merged sessions reconstruct with their own settings (silhouette pixels left out)
+    first, second = (reconstruct(read_scan(r), SessionsConfig().reconstruct) for r in (root, second_root))
     try:
         merged = merge_reconstructions([first, second], [root, second_root])
     except SessionError as e:
