@@ -58,3 +58,11 @@ def test_summary_splits_by_size_and_counts_targets():
     assert summary["tsdf_ms_per_frame"]["max"] == 30.0 and summary["decompose_s"]["median"] == 5.0
     assert summary["size >= 5 cm, workshop tools, low noise"]["objects"] == 1
     assert summary["size >= 5 cm, primitives and MIT push shapes, low noise"]["volume_error_pct"]["max"] == 1.0
+
+
+def test_unknown_object_name_is_refused_with_the_choices(tmp_path):
+    """--names with a name not in the run fails before any work, naming it and the objects to choose from."""
+    from twin.bench.reconstruct import bench_reconstruct
+
+    with pytest.raises(ValueError, match=r"no object named 'Allen Kez'.*'cube 30 cm'"):
+        bench_reconstruct(out_dir=tmp_path, data_root=tmp_path, sessions_only=True, names=("Allen Kez",))
