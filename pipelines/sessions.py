@@ -9,17 +9,21 @@ resting poses removes what any of them saw to be empty.
 
 Method:
 
-1. Reconstruct each session alone (`pipelines.reconstruct.reconstruct`).
-2. Observed surface: the vertices of each mesh near the points segmented as the
-   object (what its cameras saw), away from the support plane; the closed-off
-   part is left out.
+1. Reconstruct each session alone, silhouette pixels left out of the fusion
+   (`SessionsConfig.reconstruct`).
+2. Observed surface: the vertices of each mesh within the observed points'
+   spacing of the points segmented as the object (what its cameras saw), away
+   from the support plane; the closed-off part is left out.
 3. Register each later session to the first. Objective, in both directions
    (later in first, first in later): where the other solid's surface was
    observed and faces the same way, an observed point lies on it (its signed
    distance); anywhere else it lies inside that solid (the positive part of the
    signed distance). The two directions together pin the pose even when the
    sessions saw little surface in common (a flat tool turned over shares only
-   its rim). Starts: the four proper alignments of the solids' principal axes,
+   its rim). Each session's object rested on its support plane, so that plane,
+   carried into the other's world, touches the other's observed surface where
+   the object stood: those contacts are held on it, which pins a flat tool's
+   pitch. Starts: the four proper alignments of the solids' principal axes,
    plus seeded random rotations when two principal moments are close; each
    refined briefly (Levenberg-Marquardt, soft-L1 loss) on a subsample, the
    best ones refined on more points. When several distinct poses fit about
