@@ -34,7 +34,7 @@ from pipelines.identify.jointed import (
 
 from .residuals import analyse_joint_residual, describe
 from .screening import Library, fit_subset, screen
-from .select import DiagnoseConfig, Diagnosis
+from .select import DiagnoseConfig, Diagnosis, predicts_better
 
 JOINT_CANDIDATES = tuple(JOINT_EFFECT_PARAMS)
 """Joint candidates in screening order."""
@@ -104,14 +104,6 @@ def _time_blocks(recording, blocks: int = 2) -> list:
             for a, b in zip(edges[:-1], edges[1:])]
 
 
-def _better(mse: np.ndarray, reference: np.ndarray) -> bool:
-    """Whether per-window errors `mse` beat `reference`'s by more than twice the standard error of the paired
-    difference (windows are nearly independent), the rule the identification keeps its Newton fit by. The
-    difference is of log errors: one window that diverges must not outweigh all the others."""
-    d = np.log(np.maximum(mse, 1e-300)) - np.log(np.maximum(reference, 1e-300))
-    return bool(d.mean() + 2 * d.std(ddof=1) / np.sqrt(len(d)) < 0)
-
-
 def _metrics(joint, q_sim: np.ndarray, windows) -> FitMetrics:
     """Replay error against the zero-phase smoothed q, as the free-body replay is scored against the smoothed
     track: the tracker's noise is a floor both models share and would hide how much of the motion each one
@@ -133,7 +125,7 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
     prior: the part's prior body (object frame). Every candidate set is refitted with the body in Newton on
     the training recordings and replayed, in windows from measured starts, on the evaluation recording
     (the held-out one; without it, each half of the trial fitted on the other). A candidate is kept when
-    it predicts the windows significantly better than the base model (`_better`), a pair when it beats
+    it predicts the windows significantly better than the base model (`predicts_better`), a pair when it beats
     its better member too.
 
     Returns (Diagnosis, the identification on all trials with the chosen effects, or None if none is chosen).
@@ -171,12 +163,12 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
         return refits[names]
 
     base = evaluate(())
-    passing = sorted((c for c in JOINT_CANDIDATES if _better(evaluate((c,))["mse"], base["mse"])),
+    passing = sorted((c for c in JOINT_CANDIDATES if predicts_better(evaluate((c,))["mse"], base["mse"])),
                      key=lambda c: refits[(c,)]["mse"].sum())
     best: tuple = (passing[0],) if passing else ()
     if len(passing) >= 2:
         pair = tuple(c for c in JOINT_CANDIDATES if c in passing[:2])
-        if _better(evaluate(pair)["mse"], refits[best]["mse"]):
+        if predicts_better(evaluate(pair)["mse"], refits[best]["mse"]):
             best = pair
     scores = {"+".join(k) or "none": float(v["mse"].mean()) for k, v in refits.items()}
 
