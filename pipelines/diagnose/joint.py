@@ -15,7 +15,7 @@ Screening regresses the joint effort on the base columns plus every candidate's
 and bootstrap inclusion probabilities. Effort regression is weak evidence here:
 q'' from tracked poses carries noise far above the F/T sensor's. So every
 candidate, alone, is refitted with the body in Newton (`identify_jointed(...,
-effects=...)`) and replayed on held-out data in windows from measured starts;
+effects=...)`) and replayed on held-out data in windows from smoothed starts;
 a candidate is chosen when it predicts the windows significantly better than
 the base model, the pair of the two best when it beats the better of them.
 """
@@ -123,7 +123,7 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
     """Diagnose a part on `joint` from `trials`; `holdout` (a Recording or None) chooses and validates.
 
     prior: the part's prior body (object frame). Every candidate set is refitted with the body in Newton on
-    the training recordings and replayed, in windows from measured starts, on the evaluation recording
+    the training recordings and replayed, in windows from smoothed starts, on the evaluation recording
     (the held-out one; without it, each half of the trial fitted on the other). A candidate is kept when
     it predicts the windows significantly better than the base model (`predicts_better`), a pair when it beats
     its better member too.
