@@ -160,6 +160,8 @@ class Bench:
     """Recordings without one (diagnose)."""
     duration_s: float = 3.0
     """Length of each recording [s] (diagnose)."""
+    cases: tuple[int, ...] = ()
+    """diagnose: only these case indices of the shuffled list (the same recordings as the full run; default all)."""
     workshop: bool = False
     """Diagnose the workshop-tools recordings of ../shared/data instead of synthetic ones (diagnose)."""
 
@@ -283,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
                 if command.workshop:
                     bench_diagnose_workshop()
                 else:
-                    bench_diagnose(command.concealed, command.clean, command.duration_s)
+                    bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases)
             elif command.what == "crlb":
                 from twin.bench.crlb import bench_crlb
 

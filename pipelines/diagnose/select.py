@@ -58,6 +58,10 @@ class DiagnoseConfig:
     """A stretch holding at least this share of a non-white residual is reported as unexplained."""
     window_s: float = 0.1
     """Windows of the Newton replay [s]."""
+    joint_window_s: float = 0.6
+    """Windows of the jointed refits and replays [s]. A passive joint force (b q', k q) is told from each
+    window's free start state (q, q') only over longer windows than the identification's: in 0.3 s ones a
+    drawer's damping came back 24-40 % low."""
     seed: int = 0
 
 
@@ -89,6 +93,14 @@ class Diagnosis:
             "residuals": {k: v.to_json() for k, v in self.residuals.items()},
             "findings": list(self.findings),
         }
+
+
+def predicts_better(mse: np.ndarray, reference: np.ndarray) -> bool:
+    """Whether per-window errors `mse` beat `reference`'s by more than twice the standard error of the paired
+    difference (windows are nearly independent), the rule the identification keeps its Newton fit by. The
+    difference is of log errors: one window that diverges must not outweigh all the others."""
+    d = np.log(np.maximum(mse, 1e-300)) - np.log(np.maximum(reference, 1e-300))
+    return bool(d.mean() + 2 * d.std(ddof=1) / np.sqrt(len(d)) < 0)
 
 
 @dataclass(frozen=True)
@@ -202,7 +214,8 @@ def _residual(rows: NewtonEulerRows, model: _Model, com_tracked: np.ndarray) -> 
 
 def _replay(recording, X_tracked_body: Pose, inertial: Inertial, effect: np.ndarray, delay_s: float,
             window_s: float) -> tuple[FitMetrics, dict]:
-    """Newton windowed replay of `recording` with the effects; position error and traces.
+    """Newton windowed replay of `recording` with the effects; position error and traces (with the mean
+    squared position error per window [m^2], "window_mse").
 
     Poses and wrench are low-passed (zero phase) at the identification's cutoff first, so each window starts
     from the smoothed measured state and is compared with the smoothed track: tracker noise on a start
@@ -216,13 +229,15 @@ def _replay(recording, X_tracked_body: Pose, inertial: Inertial, effect: np.ndar
     theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())[None]
     r = rollout.residuals(theta, momentum_scaled=False, effect=effect[None])[:, 0]
     rp, rr = r[..., :3], r[..., 3:]
+    window_mse = np.mean(np.sum(rp**2, -1), axis=0)
     t = windows.t_start_s[None, :] + windows.dt_s * windows.substeps * np.arange(1, windows.sample_count + 1)[:, None]
     measured = windows.measured_position[1:]
     fit = FitMetrics(rmse_position_m=float(np.sqrt(np.mean(np.sum(rp**2, -1)))),
                      rmse_rotation_rad=float(np.sqrt(np.mean(np.sum(rr**2, -1)))),
                      loss=float(np.mean(np.sum(rp**2, -1) + np.sum(rr**2, -1))))
     return fit, {"t_s": t.T.reshape(-1).tolist(), "measured_position": measured.transpose(1, 0, 2).reshape(-1, 3).tolist(),
-                 "position": (measured + rp).transpose(1, 0, 2).reshape(-1, 3).tolist(), "window_s": windows.window_s}
+                 "position": (measured + rp).transpose(1, 0, 2).reshape(-1, 3).tolist(), "window_s": windows.window_s,
+                 "window_mse": window_mse}
 
 
 def _newton_refit(trials, X_tracked_body: Pose, inertial: Inertial, effect: np.ndarray, slots: list[int],
@@ -310,13 +325,15 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
     slots = [k for n in best if CANDIDATES[n].effect_slots for k in CANDIDATES[n].effect_slots]
     newton = None
     if slots:
-        # the Newton refit confirms and quantifies; its values are kept where they predict the evaluation better
+        # the Newton refit confirms and quantifies; its values are kept where they predict the evaluation windows
+        # significantly better: in 0.1 s windows from fixed starts it sees a weak effect less well than the
+        # wrench does (a 0.6-ratio damping came back 19 % low for a 3 % lower replay error)
         refit, losses = _newton_refit(trials, X_tracked_body, after_inertial, effect, slots, model.delay_s, config)
         fit_newton, trace_newton = _replay(evaluation, X_tracked_body, after_inertial, refit, model.delay_s,
                                            config.window_s)
         newton = {"trial_position_loss_m2": losses, "heldout_rmse_position_m": fit_newton.rmse_position_m,
                   "heldout_rmse_position_least_squares_m": fit_after.rmse_position_m,
-                  "kept": fit_newton.rmse_position_m < fit_after.rmse_position_m}
+                  "kept": predicts_better(trace_newton["window_mse"], trace_after["window_mse"])}
         if newton["kept"]:
             effect, fit_after, trace_after = refit, fit_newton, trace_newton
             model = replace(model, coefficients={

@@ -140,6 +140,7 @@ class _Windows:
     dt_s: float
     substeps: int
     q: np.ndarray          # [S+1, W] measured q at samples
+    q_smoothed: np.ndarray  # [S+1, W] zero-phase low-passed q at samples
     t_s: np.ndarray        # [S, W] times of samples 1..S
     q_start: np.ndarray    # [W] smoothed
     qd_start: np.ndarray   # [W]
@@ -171,11 +172,13 @@ def joint_windows(recording, joint: JointFit, config: JointedConfig) -> _Windows
     t_step = grid[starts][None, :] + dt * np.arange(steps)[:, None]
     idx = np.clip(np.searchsorted(t_wrench, t_step + 1e-9, side="right") - 1, 0, len(t_wrench) - 1)
     sample_idx = starts[None, :] + np.arange(samples + 1)[:, None]
-    return _Windows(dt, config.substeps, qg[sample_idx], grid[sample_idx[1:]], qs[starts], qds[starts], tau[idx])
+    return _Windows(dt, config.substeps, qg[sample_idx], qs[sample_idx], grid[sample_idx[1:]], qs[starts], qds[starts],
+                    tau[idx])
 
 
 def _concat(parts: list[_Windows]) -> _Windows:
     return _Windows(parts[0].dt_s, parts[0].substeps, np.concatenate([p.q for p in parts], 1),
+                    np.concatenate([p.q_smoothed for p in parts], 1),
                     np.concatenate([p.t_s for p in parts], 1),
                     np.concatenate([p.q_start for p in parts]), np.concatenate([p.qd_start for p in parts]),
                     np.concatenate([p.effort for p in parts], 1))

@@ -101,3 +101,17 @@ def test_mismatch_no_candidate_explains_is_localised(tmp_path_factory):
     a, b = diagnosis.unexplained[0]["where"]["t_s"]
     assert 1.0 < a < 1.3 and 1.35 < b < 1.6
     assert diagnosis.unexplained[0]["share"] > 0.5
+
+
+def test_predicts_better_needs_a_consistent_gain():
+    """A model is better only where most windows agree: not by a tie, nor by one window's gain."""
+    from pipelines.diagnose.select import predicts_better
+
+    rng = np.random.default_rng(0)
+    reference = rng.uniform(1e-7, 2e-7, 30)
+    assert predicts_better(0.8 * reference, reference)
+    assert not predicts_better(reference, reference)
+    assert not predicts_better(reference * rng.uniform(0.9, 1.1, 30), reference)
+    one_window = reference.copy()
+    one_window[0] *= 1e-6
+    assert not predicts_better(one_window, reference)
