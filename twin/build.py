@@ -147,9 +147,19 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
 
     diagnosis = None
     if detection.kind == "sliding":
-        theta, fit, identify_provenance, loss_history, traces = timer.run(
-            "identify", _identify_sliding, trials, holdout, mesh_object, prior
-        )
+        from pipelines.diagnose import diagnose_pushed
+        from pipelines.identify.sliding import SlidingConfig, identify_pushed
+
+        body, mu_prior = _sliding_body(mesh_object, prior)
+        sconfig = SlidingConfig()
+        pushed = timer.run("identify", identify_pushed, trials, holdout, body, mu_prior, sconfig)
+        refit = None
+        if config.diagnose:
+            diagnosis, refit = timer.run("diagnose", diagnose_pushed, trials, [holdout] if holdout else [], body,
+                                         mu_prior, sconfig, DiagnoseConfig())
+            _log_diagnosis(diagnosis, log)
+        theta, fit, identify_provenance, loss_history, traces = _sliding_result(pushed, refit, diagnosis, body,
+                                                                                 prior)
     else:
         X_tracked_body = tracked_to_object(trials[0], placement)
         id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations,
@@ -229,26 +239,35 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     return out
 
 
-def _identify_sliding(trials, holdout, mesh_object, prior):
-    """Friction of a pushed object, with mass and yaw inertia where the pushes determine them.
+def _sliding_body(mesh_object, prior):
+    """The pushed object as the sliding model sees it, and the prior's friction coefficient.
 
-    The support face is the mesh's bounding box bottom (object frame, axes parallel to
-    world at the scan). What the pushes leave undetermined keeps the prior's value and
-    is marked "prior"; COM and the tilting moments always are.
+    The support face is the mesh's bounding box bottom (object frame, axes parallel to world at the scan);
+    mass and I_zz spreads from the bounds C, taken as about +-2 std of the log.
     """
-    from assets import Estimate, Fit, FitMetrics, Theta
-    from pipelines.identify.sliding import PlanarBody, SlidingConfig, identify_pushed
+    from pipelines.identify.sliding import PlanarBody
 
-    inertia0 = np.asarray(prior.inertial.inertia, dtype=float)
-    mass0 = float(prior.inertial.mass)
-    # the bounds C as about +-2 std of the log (lower/upper: mass, COM x y z, Ixx Iyy Izz)
     mass_rel = float(np.log(prior.upper[0] / prior.lower[0]) / 4)
     izz_rel = float(np.log(prior.upper[6] / prior.lower[6]) / 4)
-    body = PlanarBody(tuple(0.5 * (mesh_object.bounds[1] - mesh_object.bounds[0])), mass0, float(inertia0[2, 2]),
-                      mass_rel_std=mass_rel, izz_rel_std=izz_rel)
-    config = SlidingConfig()
-    pushed = identify_pushed(trials, holdout, body, float(prior.friction_kinetic[0]), config)
-    fit = pushed.fit
+    body = PlanarBody(tuple(0.5 * (mesh_object.bounds[1] - mesh_object.bounds[0])), float(prior.inertial.mass),
+                      float(np.asarray(prior.inertial.inertia)[2, 2]), mass_rel_std=mass_rel, izz_rel_std=izz_rel)
+    return body, float(prior.friction_kinetic[0])
+
+
+def _sliding_result(pushed, refit, diagnosis, body, prior):
+    """Theta, fit metrics, provenance, loss curve and traces of a pushed object.
+
+    What the pushes leave undetermined keeps the prior's value and is marked "prior"; COM and the
+    tilting moments always are. With effects chosen by the diagnosis, its refit (mu and I_zz fitted with
+    them) replaces the identification's, whose estimate lacked them, as for a free body.
+    """
+    from dataclasses import asdict
+
+    from assets import Estimate, Fit, FitMetrics, Theta
+
+    fit = refit if refit is not None else pushed.fit
+    inertia0 = np.asarray(prior.inertial.inertia, dtype=float)
+    mass0 = float(prior.inertial.mass)
     (mu, mass, izz), (mu_std, mass_std, izz_std) = fit.theta, fit.std
     _, mass_known, izz_known = fit.determined
     # one tensor scale keeps it physically consistent: Izz's if the pushes determined it, else the mass's
@@ -263,7 +282,13 @@ def _identify_sliding(trials, holdout, mesh_object, prior):
         friction=Estimate(float(mu), float(mu_std), interval95=(float(mu - 1.96 * mu_std), float(mu + 1.96 * mu_std))),
     )
     metrics = {k: FitMetrics(*v) for k, v in (("baseline", pushed.baseline), ("final", pushed.final))}
-    return (theta, Fit(metrics["baseline"], metrics["final"], config.window_s), {"identify": pushed.provenance()},
+    if refit is not None:
+        metrics = {"baseline": diagnosis.fits["before"], "final": diagnosis.fits["after"]}
+    provenance = {"identify": pushed.provenance() | {"body": asdict(body)},
+                  **({"diagnose": diagnosis.provenance()} if diagnosis else {})}
+    if refit is not None:
+        provenance["identify"]["with_effects"] = refit.provenance()
+    return (theta, Fit(metrics["baseline"], metrics["final"], pushed.config.window_s), provenance,
             fit.loss_history, pushed.traces)
 
 
@@ -300,7 +325,6 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
     """
     from assets import Inertial, Pose, asset_to_json, read_asset, write_asset
     from pipelines.diagnose import DiagnoseConfig, diagnose_held
-    from pipelines.logs import read_recording
     from twin.report import write_report
 
     out = Path(config.output)
@@ -309,14 +333,28 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
     if not config.logs:
         raise BuildError("no recording given: pass --logs TRIAL.mcap")
     for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
-        if not Path(path).is_file():
+        if not Path(path).exists():
             raise BuildError(f"{path}: recording not found")
     asset = read_asset(out / "asset.json")
     provenance = asset.provenance
-    trials = [read_recording(p) for p in config.logs]
-    holdout = read_recording(config.holdout) if config.holdout else None
+    # the recordings are read with the options the asset was built with (topics, frames, sensor rotation)
+    built = provenance.get("config", {})
+    reader = BuildConfig(source=out, logs=(), topics=tuple(map(tuple, built.get("topics", ()))),
+                         frames=tuple(map(tuple, built.get("frames", ()))),
+                         wrench_rotation_xyzw=built.get("wrench_rotation_xyzw"),
+                         wrench_reaction=bool(built.get("wrench_reaction", False)))
+    trials = [reader.read(p) for p in config.logs]
+    holdout = reader.read(config.holdout) if config.holdout else None
     try:
-        if asset.joint is not None:
+        if asset.kind == "sliding":
+            from pipelines.identify.sliding import PlanarBody, SlidingConfig
+
+            identified = provenance["identify"]
+            body = PlanarBody(**{k: tuple(v) if isinstance(v, list) else v for k, v in identified["body"].items()})
+            sconfig = SlidingConfig(**{k: tuple(v) if isinstance(v, list) else v
+                                       for k, v in identified["config"].items()})
+            mu_prior = identified["prior_theta"][0]
+        elif asset.joint is not None:
             from pipelines.diagnose import diagnose_jointed
             from pipelines.identify.jointed import JointedConfig
             from pipelines.identify.kind import detect_kind
@@ -329,7 +367,12 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
             tracked = provenance["tracked_frame_in_object"]
     except KeyError as exc:
         raise BuildError(f"{out}/asset.json: provenance lacks {exc}; rebuild it with this version of twin") from exc
-    if asset.joint is not None:
+    if asset.kind == "sliding":
+        from pipelines.diagnose import diagnose_pushed
+
+        diagnosis, _ = diagnose_pushed(trials, [holdout] if holdout else [], body, mu_prior, sconfig,
+                                       DiagnoseConfig(bootstraps=config.bootstraps))
+    elif asset.joint is not None:
         joint = detect_kind(trials[0], asset.kind).joint
         diagnosis, _ = diagnose_jointed(trials, holdout, joint, asset.placement, prior, jconfig,
                                         DiagnoseConfig(bootstraps=config.bootstraps))

@@ -133,7 +133,7 @@ class Bench:
     seeds: int = 5
     """Noise draws per object (paper, mujoco)."""
     blocks: tuple[str, ...] = ()
-    """push-real: block folders to run (St_block, Al_block, Plastic_block; default all)."""
+    """push-real, diagnose --push-real: block folders to run (St_block, Al_block, Plastic_block; default all)."""
     offsets_only: bool = False
     """push-real: only the quasi-static friction of every bag under three force-offset models (no Newton fits)."""
     paper_optimizer: bool = False
@@ -164,6 +164,9 @@ class Bench:
     """diagnose: only these case indices of the shuffled list (the same recordings as the full run; default all)."""
     workshop: bool = False
     """Diagnose the workshop-tools recordings of ../shared/data instead of synthetic ones (diagnose)."""
+    push_real: bool = False
+    """Diagnose the MIT block pushes of ../shared/data (odd trials fitted, even held out; --blocks picks)
+    instead of synthetic recordings (diagnose)."""
 
 
 def _log(message: str) -> None:
@@ -280,10 +283,12 @@ def main(argv: list[str] | None = None) -> int:
 
                 bench_sample(command.sample, command.methods)
             elif command.what == "diagnose":
-                from twin.bench.diagnose import bench_diagnose, bench_diagnose_workshop
+                from twin.bench.diagnose import bench_diagnose, bench_diagnose_push_real, bench_diagnose_workshop
 
                 if command.workshop:
                     bench_diagnose_workshop()
+                elif command.push_real:
+                    bench_diagnose_push_real(command.blocks)
                 else:
                     bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases)
             elif command.what == "crlb":

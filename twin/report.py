@@ -69,14 +69,17 @@ def _diagnosis_plots(traces: dict) -> str:
     import matplotlib.pyplot as plt
 
     t = np.asarray(traces["residual_t_s"])
-    # a wrench residual has force and torque channels, a joint's one effort channel
-    parts = (((slice(0, 3), "force"), (slice(3, 6), "torque")) if np.asarray(traces["residual_before"]).shape[1] == 6
-             else ((slice(0, 1), "joint effort"),))
+    order = np.argsort(t, kind="stable")  # several evaluation recordings interleave in time
+    # a wrench residual has force and torque channels, a pushed object's replay position and heading errors,
+    # a joint's one effort channel
+    parts = {6: ((slice(0, 3), "force"), (slice(3, 6), "torque")),
+             3: ((slice(0, 2), "position"), (slice(2, 3), "heading arc"))}.get(
+        np.asarray(traces["residual_before"]).shape[1], ((slice(0, 1), "joint effort"),))
     fig, axes = plt.subplots(len(parts) + 1, 1, figsize=(9, 8), sharex=True)
     for ax, (part, label) in zip(axes, parts):
         for key, color in (("residual_before", "tab:red"), ("residual_after", "tab:blue")):
             r = np.linalg.norm(np.asarray(traces[key])[:, part], axis=1)
-            ax.plot(t, r, lw=0.8, color=color, label=key.split("_")[1])
+            ax.plot(t[order], r[order], lw=0.8, color=color, label=key.split("_")[1])
         ax.set_ylabel(f"|{label} residual| [noise]")
     axes[0].legend(loc="upper right")
     axes[0].set_title("What the model leaves unexplained, before and after the chosen effects")

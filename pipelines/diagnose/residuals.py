@@ -20,16 +20,18 @@ from scipy.stats import chi2
 from pipelines.identify.least_squares import NewtonEulerRows
 
 CHANNELS = ("fx", "fy", "fz", "tx", "ty", "tz")
+PLANAR_CHANNELS = ("x", "y", "heading")
 
 
 @dataclass(frozen=True)
 class ResidualAnalysis:
-    """rms [6] in noise units; whiteness_p [6]: Ljung-Box p-values (small: not white);
-    xcorr_peak_lag_s [6] and xcorr_peak [6]: residual vs measured wrench of the same channel;
-    correlation: feature -> [6] Pearson coefficients (velocity-like features use the linear
+    """Per channel (the wrench's six, a joint's effort, or a pushed object's x, y, heading replay errors):
+    rms in noise units; whiteness_p: Ljung-Box p-values (small: not white);
+    xcorr_peak_lag_s and xcorr_peak: residual vs the measured wrench (pusher force) of the same channel;
+    correlation: feature -> Pearson coefficient per channel (velocity-like features use the linear
     velocity for force channels and the angular velocity for torque channels); localisation:
     {"summary", "where": {"t_s": [a, b], "speed": [a, b]}, "share"} per stretch, largest first;
-    channels: the residual's channel names (the wrench's six, or a joint's effort)."""
+    channels: the residual's channel names."""
 
     rms: list[float]
     whiteness_p: list[float]
@@ -127,6 +129,38 @@ def analyse_joint_residual(t_s: np.ndarray, q: np.ndarray, qd: np.ndarray, effor
     )
 
 
+def analyse_planar_residual(t_s: np.ndarray, velocity: np.ndarray, force: np.ndarray, residual: np.ndarray, *,
+                            window_samples: int, block_s: float = 0.25, excess: float = 4.0) -> ResidualAnalysis:
+    """Analyse a pushed object's replay errors [N, 3] (x, y, heading arc; tracker-noise units), window by window.
+
+    Rows run through windows of `window_samples` samples, each replayed from a measured start; velocity [N, 3]:
+    vx, vy [m/s], yaw rate [rad/s]; force [N, 2]: the pusher's, world x, y [N]. The error accumulates within a
+    window, so whiteness is tested on the windows' final errors, and correlations and the cross-correlation
+    with the force on its per-sample increments (what each step adds: force and state errors act there).
+    """
+    S = window_samples
+    increments = np.diff(np.concatenate([np.zeros((len(residual) // S, 1, 3)), residual.reshape(-1, S, 3)], 1),
+                         axis=1).reshape(-1, 3)
+    magnitude = np.linalg.norm(force, axis=1)
+    pushing = np.c_[force, magnitude]  # the heading channel against the force's size
+    features = {"velocity": velocity, "sign_velocity": np.sign(velocity), "speed_squared": np.abs(velocity) * velocity,
+                "force": pushing}
+    rate_hz = 1.0 / float(np.median(np.diff(t_s[:S]))) if S > 1 else 1.0
+    lags = [_peak_lag(increments[:, j], pushing[:, j], max(1, S // 3)) for j in range(3)]
+    final = residual[S - 1::S]
+    energy = uniform_filter1d(np.sum(residual**2, axis=1), max(1, int(block_s * rate_hz)))
+    return ResidualAnalysis(
+        rms=np.sqrt(np.mean(residual**2, axis=0)).tolist(),
+        whiteness_p=[_ljung_box_p(final[:, j], max(1, min(10, len(final) // 4))) for j in range(3)],
+        xcorr_peak_lag_s=[lag / rate_hz for lag, _ in lags],
+        xcorr_peak=[p for _, p in lags],
+        correlation={k: [_pearson(increments[:, j], f[:, j]) for j in range(3)] for k, f in features.items()},
+        localisation=_localise(t_s, energy, np.sum(residual**2, axis=1), np.linalg.norm(velocity[:, :2], axis=1),
+                               excess, what="replay error"),
+        channels=PLANAR_CHANNELS,
+    )
+
+
 def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndarray, excess: float,
               speed_name: str = "|v|", speed_unit: str = "m/s", what: str = "wrench residual") -> list[dict]:
     """Stretches where the smoothed residual energy exceeds `excess` x its median, largest share first."""
@@ -156,7 +190,8 @@ def describe(analysis: ResidualAnalysis, threshold: float = 0.3) -> list[str]:
             lines.append(f"{ch}: residual not white (Ljung-Box p = {analysis.whiteness_p[j]:.1e}), "
                          f"RMS {analysis.rms[j]:.2f}x noise")
         if analysis.xcorr_peak_lag_s[j] != 0 and abs(analysis.xcorr_peak[j]) > threshold:
-            lines.append(f"{ch}: residual peaks against the measured {'wrench' if ch in CHANNELS else ch} at lag "
+            against = "wrench" if ch in CHANNELS else ("pusher force" if ch in PLANAR_CHANNELS else ch)
+            lines.append(f"{ch}: residual peaks against the measured {against} at lag "
                          f"{1000 * analysis.xcorr_peak_lag_s[j]:+.0f} ms (r = {analysis.xcorr_peak[j]:.2f})")
         for k, values in analysis.correlation.items():
             if abs(values[j]) > threshold:

@@ -36,11 +36,11 @@ class Library:
 @dataclass(frozen=True)
 class Screening:
     """inclusion: bootstrap inclusion probability per candidate; selected: the subset chosen on
-    all rows; coefficients: its fitted coefficients per candidate; bootstraps: resamples."""
+    all rows; coefficients: its fitted coefficients (or named parameters) per candidate; bootstraps: resamples."""
 
     inclusion: dict[str, float]
     selected: tuple[str, ...]
-    coefficients: dict[str, list[float]]
+    coefficients: dict[str, list[float] | dict]
     bootstraps: int
 
     def leading(self, threshold: float, limit: int) -> tuple[str, ...]:

@@ -278,12 +278,13 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
 
 
 def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: ForceBias | None = None,
-                 moving_only: bool = True) -> PushWindows:
+                 moving_only: bool = True, delay_s: float = 0.0) -> PushWindows:
     """Back-to-back windows over the part of `recording` where the pusher touches the object.
 
     The force is the recording's world-axes wrench force minus `bias` at its stamps; the contact
     point is the recording's contact track (required: a push is a force at a point).
-    With moving_only, windows where the object does not slide are left out.
+    With moving_only, windows where the object does not slide are left out. delay_s: the wrench
+    stamped t acted at t - delay_s (DESIGN.md time_delay).
     """
     if recording.contact is None:
         raise ValueError(
@@ -317,7 +318,7 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: Force
     w = recording.wrench
     force = w.force[:, :2] - (bias.at(w.t_s)[:, :2] if bias is not None else 0.0)  # unfiltered: noise averages out
     t_step = grid[starts][None, :] + dt * np.arange(samples * substeps)[:, None]
-    f = np.stack([np.interp(t_step, w.t_s, force[:, k]) for k in range(2)], axis=-1)
+    f = np.stack([np.interp(t_step, w.t_s - delay_s, force[:, k]) for k in range(2)], axis=-1)
     p = np.stack([np.interp(t_step, c.t_s, c.position[:, k]) for k in range(2)], axis=-1)
     rot = Rotation.from_rotvec(np.c_[np.zeros((len(yaw), 2)), yaw])
     pos3 = np.c_[xy, np.zeros(len(grid))]
@@ -419,6 +420,30 @@ def apply_pusher_force(
     body_f[w] = wp.spatial_vector(f, wp.cross(arm, f))
 
 
+EFFECT_SLOTS = {"sensor_bias": (0, 1), "viscous_damping": (2, 3)}
+"""Where each additive effect's parameters sit in the rollout's effect vector (see apply_sliding_effects)."""
+EFFECT_SIZE = 4
+
+
+@wp.kernel
+def apply_sliding_effects(
+    body_qd: wp.array[wp.spatial_vector],
+    effect: wp.array[float],
+    body_f: wp.array[wp.spatial_vector],
+):
+    """Add to the pusher's wrench what the base model leaves out: a force offset still in the reading
+    (measured = applied + (effect[0], effect[1]) [N], world x, y; the same at every point of the push
+    contact, so applied at the COM it only shifts the force) and viscous drag on the sliding body,
+    -effect[2] v [N s/m] and -effect[3] omega_z [N m s] (velocity-strengthening friction)."""
+    w = wp.tid()
+    qd = body_qd[w]
+    v = wp.spatial_top(qd)
+    omega = wp.spatial_bottom(qd)
+    f = wp.vec3(-effect[0] - effect[2] * v[0], -effect[1] - effect[2] * v[1], 0.0)
+    tau = wp.vec3(0.0, 0.0, -effect[3] * omega[2])
+    body_f[w] = body_f[w] + wp.spatial_vector(f, tau)
+
+
 @wp.kernel
 def eval_planar_error(
     body_q: wp.array[wp.transform],
@@ -491,6 +516,7 @@ class SlidingRollout:
         self.contact = wp.array(windows.contact.astype(np.float32), dtype=wp.vec2, device=device)
         self.measured = wp.array(windows.measured.astype(np.float32), dtype=wp.vec3, device=device)
         self.theta = wp.zeros(3, dtype=float, device=device, requires_grad=True)
+        self.effect = wp.zeros(EFFECT_SIZE, dtype=float, device=device, requires_grad=True)
         self.correction = wp.zeros(W, dtype=wp.vec3, device=device, requires_grad=True)
         self.residual = wp.zeros((windows.sample_count + 1, W, 3), dtype=float, device=device, requires_grad=True)
         self.loss = wp.zeros(1, dtype=float, device=device, requires_grad=True)
@@ -519,38 +545,42 @@ class SlidingRollout:
             wp.launch(apply_pusher_force, dim=w.window_count,
                       inputs=[s.body_q, model.body_com, self.force, self.contact, step],
                       outputs=[s.body_f], device=self.device)
+            wp.launch(apply_sliding_effects, dim=w.window_count, inputs=[s.body_qd, self.effect], outputs=[s.body_f],
+                      device=self.device)
             self.solver.step(s, s_next, self.control, self.contacts, w.dt_s)
             if (step + 1) % w.substeps == 0:
                 wp.launch(eval_planar_error, dim=w.window_count,
                           inputs=[s_next.body_q, self.measured, (step + 1) // w.substeps, self.yaw_length_m],
                           outputs=[self.residual], device=self.device)
 
-    def _load(self, theta, correction) -> None:
+    def _load(self, theta, correction, effect) -> None:
         self.theta.assign(np.asarray(theta, dtype=np.float32))
         W = self.windows.window_count
         c = np.zeros((W, 3)) if correction is None else np.asarray(correction).reshape(W, 3)
         self.correction.assign(c.astype(np.float32))
+        self.effect.assign(np.zeros(EFFECT_SIZE, np.float32) if effect is None else np.asarray(effect, np.float32))
 
-    def residuals(self, theta, correction=None) -> np.ndarray:
+    def residuals(self, theta, correction=None, effect=None) -> np.ndarray:
         """Errors [S, W, 3] at samples 1..S: x, y [m], heading x yaw_length_m [m].
 
-        correction [W, 3]: start-velocity corrections (vx, vy [m/s], yaw rate [rad/s]).
+        correction [W, 3]: start-velocity corrections (vx, vy [m/s], yaw rate [rad/s]);
+        effect [EFFECT_SIZE]: see apply_sliding_effects (None: none).
         """
-        self._load(theta, correction)
+        self._load(theta, correction, effect)
         self._forward()
         return self.residual.numpy()[1:].astype(float)
 
-    def trajectories(self, theta, correction=None) -> np.ndarray:
+    def trajectories(self, theta, correction=None, effect=None) -> np.ndarray:
         """Simulated x, y [m] and yaw [rad] at samples 0..S, shape [S+1, W, 3]."""
-        r = self.residuals(theta, correction)
+        r = self.residuals(theta, correction, effect)
         pred = self.windows.measured.copy()
         pred[1:, :, :2] += r[:, :, :2]
         pred[1:, :, 2] += r[:, :, 2] / self.yaw_length_m
         return pred
 
-    def loss_and_grad(self, theta, correction=None) -> tuple[float, np.ndarray, np.ndarray]:
-        """Sum of squared residuals [m^2] and its gradients w.r.t. theta and the corrections [W, 3]."""
-        self._load(theta, correction)
+    def loss_and_grad(self, theta, correction=None, effect=None) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """Sum of squared residuals [m^2] and its gradients w.r.t. theta, the corrections [W, 3] and the effect."""
+        self._load(theta, correction, effect)
         tape = wp.Tape()
         with tape:
             self._forward()
@@ -559,7 +589,7 @@ class SlidingRollout:
                       device=self.device)
         tape.backward(self.loss)
         out = (float(self.loss.numpy()[0]), self.theta.grad.numpy().astype(float).copy(),
-               self.correction.grad.numpy().astype(float).copy())
+               self.correction.grad.numpy().astype(float).copy(), self.effect.grad.numpy().astype(float).copy())
         tape.zero()
         return out
 
@@ -577,6 +607,8 @@ class SlidingFit:
     independent, so optimistic); determined: per parameter, whether the data at
     least halve the prior's variance (else the value is essentially the prior's
     and is marked "prior").
+    effect [EFFECT_SIZE], effect_std: the fitted effect vector (zeros where no effect was
+    fitted; see apply_sliding_effects) and the standard deviations of its fitted slots.
     rmse_position_m, rmse_heading_rad: windowed replay at theta over the fitted
     windows, each started at its fitted velocity.
     loss_history: objective per evaluation.
@@ -592,6 +624,8 @@ class SlidingFit:
     loss_history: list = field(default_factory=list)
     correction: np.ndarray | None = None
     """Fitted start-velocity corrections per window [W, 3]: vx, vy [m/s], yaw rate [rad/s]."""
+    effect: np.ndarray = field(default_factory=lambda: np.zeros(EFFECT_SIZE))
+    effect_std: np.ndarray = field(default_factory=lambda: np.zeros(EFFECT_SIZE))
 
     def provenance(self) -> dict:
         names = ("friction", "mass", "izz")
@@ -606,12 +640,19 @@ class SlidingFit:
         }
 
 
-def replay_errors(rollout: SlidingRollout, theta, correction=None) -> tuple[float, float]:
+def replay_errors(rollout: SlidingRollout, theta, correction=None, effect=None) -> tuple[float, float]:
     """Position RMSE [m] and heading RMSE [rad] of the windowed replay at theta."""
-    r = rollout.residuals(theta, correction)
+    r = rollout.residuals(theta, correction, effect)
     return float(np.sqrt(np.mean(np.sum(r[..., :2] ** 2, axis=-1)))), float(
         np.sqrt(np.mean(r[..., 2] ** 2)) / rollout.yaw_length_m
     )
+
+
+_EFFECT_SCALE = np.array([0.05, 0.05, 0.5, 1e-3])
+"""Typical sizes of the effect slots (force offset [N], drag [N s/m], turning drag [N m s]): the
+optimiser's units."""
+_EFFECT_BOUNDS = ((-5.0, 5.0), (-5.0, 5.0), (0.0, 50.0), (0.0, 0.5))
+"""Drag is passive: it only takes energy out."""
 
 
 def identify_sliding(
@@ -621,12 +662,15 @@ def identify_sliding(
     mu_prior: float = 0.3,
     free: tuple[bool, bool, bool] = (True, True, True),
     device: str = "cpu",
+    effects: tuple[str, ...] = (),
 ) -> SlidingFit:
-    """Fit theta = (mu, m, I_zz) to the windows by L-BFGS-B on the tape's gradient.
+    """Fit theta = (mu, m, I_zz), and the parameters of `effects` (names of EFFECT_SLOTS), to the
+    windows by L-BFGS-B on the tape's gradient.
 
     The objective is the pose loss over sigma^2 (sigma: the fit's own residual
-    RMS, refitted once) plus the log-normal prior of m and I_zz; mu has only its
-    bounds. `free` freezes parameters at their prior (e.g. free=(True, False, False)).
+    RMS, refitted once) plus the log-normal prior of m and I_zz; mu and the
+    effects have only their bounds. `free` freezes parameters at their prior
+    (e.g. free=(True, False, False)).
     """
     from scipy.optimize import minimize
 
@@ -638,7 +682,9 @@ def identify_sliding(
     lo = np.log([config.mu_bounds[0], body.mass_kg / 4, body.izz_kgm2 / 4])
     hi = np.log([config.mu_bounds[1], body.mass_kg * 4, body.izz_kgm2 * 4])
     free_idx = np.flatnonzero(free)
+    slots = [k for name in effects for k in EFFECT_SLOTS[name]]
     k = len(free_idx)
+    g = k + len(slots)  # global parameters: free theta (log) and effect slots (in _EFFECT_SCALE units)
     # corrections are optimised in units of a typical start-rate error: 1 cm/s and 0.1 rad/s
     c_scale = np.tile([0.01, 0.01, 0.1], W)
     history: list[float] = []
@@ -647,18 +693,21 @@ def identify_sliding(
     def split(x):
         u = prior.copy()
         u[free_idx] = x[:k]
-        return u, (x[k:] * c_scale).reshape(W, 3)
+        e = np.zeros(EFFECT_SIZE)
+        e[slots] = x[k:g] * _EFFECT_SCALE[slots]
+        return u, e, (x[g:] * c_scale).reshape(W, 3)
 
     def data_gradient(x, sigma2):
-        u, c = split(x)
+        u, e, c = split(x)
         theta = np.exp(u)
-        loss, g, gc = rollout.loss_and_grad(theta, c)
-        return 0.5 * loss / sigma2, np.concatenate([(0.5 * g * theta / sigma2)[free_idx],
-                                                    0.5 * gc.ravel() * c_scale / sigma2])
+        loss, g_theta, g_c, g_e = rollout.loss_and_grad(theta, c, e)
+        return 0.5 * loss / sigma2, np.concatenate([(0.5 * g_theta * theta / sigma2)[free_idx],
+                                                    0.5 * g_e[slots] * _EFFECT_SCALE[slots] / sigma2,
+                                                    0.5 * g_c.ravel() * c_scale / sigma2])
 
     def objective(x, sigma2):
         value, grad = data_gradient(x, sigma2)
-        u, _ = split(x)
+        u, _, _ = split(x)
         value += 0.5 * np.sum(prior_curv * (u - prior) ** 2)
         grad[:k] += (prior_curv * (u - prior))[free_idx]
         history.append(float(value))
@@ -666,50 +715,56 @@ def identify_sliding(
 
     # the data's weight against the prior is 1 / sigma^2: fitted at a typical tracker error first,
     # then again at the residual level that fit leaves
-    x = np.concatenate([prior[free_idx], np.zeros(3 * W)])
-    bounds = list(zip(lo[free_idx], hi[free_idx])) + [(-20.0, 20.0)] * (3 * W)
+    x = np.concatenate([prior[free_idx], np.zeros(len(slots)), np.zeros(3 * W)])
+    bounds = (list(zip(lo[free_idx], hi[free_idx]))
+              + [(a / sc, b / sc) for a, b, sc in ((*_EFFECT_BOUNDS[j], _EFFECT_SCALE[j]) for j in slots)]
+              + [(-20.0, 20.0)] * (3 * W))
     sigma2 = (1e-3) ** 2
     for _ in range(2):
         x = minimize(objective, x, args=(sigma2,), jac=True, method="L-BFGS-B", bounds=bounds,
                      options={"maxiter": config.max_iterations, "ftol": 1e-10, "gtol": 1e-8}).x
-        u, c = split(x)
-        sigma2 = max(float(np.sum(rollout.residuals(np.exp(u), c) ** 2)) / n_res, 1e-12)
-    u, correction = split(x)
+        u, e, c = split(x)
+        sigma2 = max(float(np.sum(rollout.residuals(np.exp(u), c, e) ** 2)) / n_res, 1e-12)
+    u, effect, correction = split(x)
     theta = np.exp(u)
 
     # curvature of the data term by central differences of the tape gradient. Each window's
     # corrections touch only its own residuals, so their block is diagonal per window and three
-    # perturbations (one per component, all windows at once) give it; theta's columns take one each.
+    # perturbations (one per component, all windows at once) give it; the globals take one each.
     h = 1e-2
-    n = k + 3 * W
+    n = g + 3 * W
     cols = {}
-    for j in range(k):
-        e = np.zeros(n)
-        e[j] = h
-        cols[j] = (data_gradient(x + e, sigma2)[1] - data_gradient(x - e, sigma2)[1]) / (2 * h)
-    H_tt = np.array([cols[j][:k] for j in range(k)])
-    H_ct = np.array([cols[j][k:] for j in range(k)]).T.reshape(W, 3, k)
+    for j in range(g):
+        step = np.zeros(n)
+        step[j] = h
+        cols[j] = (data_gradient(x + step, sigma2)[1] - data_gradient(x - step, sigma2)[1]) / (2 * h)
+    H_tt = np.array([cols[j][:g] for j in range(g)]).reshape(g, g)
+    H_ct = np.array([cols[j][g:] for j in range(g)]).T.reshape(W, 3, g)
     H_cc = np.zeros((W, 3, 3))
     for comp in range(3):
-        e = np.zeros(n)
-        e[k + comp::3] = h
-        d = ((data_gradient(x + e, sigma2)[1] - data_gradient(x - e, sigma2)[1]) / (2 * h))[k:].reshape(W, 3)
+        step = np.zeros(n)
+        step[g + comp::3] = h
+        d = ((data_gradient(x + step, sigma2)[1] - data_gradient(x - step, sigma2)[1]) / (2 * h))[g:].reshape(W, 3)
         H_cc[:, :, comp] = d
     H_cc = 0.5 * (H_cc + np.transpose(H_cc, (0, 2, 1)))
-    # theta's information with every window's start velocity profiled out (Schur complement)
+    # the globals' information with every window's start velocity profiled out (Schur complement)
     H = 0.5 * (H_tt + H_tt.T) - sum(H_ct[w].T @ np.linalg.pinv(H_cc[w]) @ H_ct[w] for w in range(W))
-    H_post = H + np.diag(prior_curv[free_idx])
+    H_post = H + np.diag(np.r_[prior_curv[free_idx], np.zeros(len(slots))])
     cov = np.linalg.pinv(H_post)
+    var = np.maximum(np.diag(cov), 0.0)
     std_log = np.array(prior_std, dtype=float)
     # a parameter the loss is flat in (e.g. mu while every window sticks) has no curvature: unknown, not exact
-    std_log[free_idx] = np.where(np.diag(H_post) > 1e-12, np.sqrt(np.maximum(np.diag(cov), 0.0)), np.inf)
+    std_log[free_idx] = np.where(np.diag(H_post)[:k] > 1e-12, np.sqrt(var[:k]), np.inf)
     # determined: the data at least halve the prior's variance (mu has no prior: determined when it has curvature)
     determined = tuple(bool(free[i] and np.isfinite(std_log[i])
                             and (not np.isfinite(prior_std[i]) or std_log[i] ** 2 < 0.5 * prior_std[i] ** 2))
                        for i in range(3))
     std = theta * np.where(np.isfinite(std_log), std_log, 0.0)
-    rmse_p, rmse_h = replay_errors(rollout, theta, correction)
-    return SlidingFit(theta, std, determined, rmse_p, rmse_h, W, len(history), history, correction=correction)
+    effect_std = np.zeros(EFFECT_SIZE)
+    effect_std[slots] = np.sqrt(var[k:g]) * _EFFECT_SCALE[slots]
+    rmse_p, rmse_h = replay_errors(rollout, theta, correction, effect)
+    return SlidingFit(theta, std, determined, rmse_p, rmse_h, W, len(history), history, correction=correction,
+                      effect=effect, effect_std=effect_std)
 
 
 def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bias: ForceBias,

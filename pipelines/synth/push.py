@@ -60,6 +60,12 @@ class PushConfig:
     """Point contacts per side of the support face."""
     force_noise_n: float = 0.05
     force_bias_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    damping_n_s_m: float = 0.0
+    """Concealed viscous drag on the block, -b v [N s/m] (velocity-strengthening friction) ..."""
+    turning_damping_n_m_s: float = 0.0
+    """... and -b_angular omega_z [N m s]."""
+    delay_s: float = 0.0
+    """Concealed time delay: the wrench stamped t acted at t - delay_s [s]."""
     position_noise_m: float = 2e-4
     yaw_noise_rad: float = 2e-3
     seed: int = 0
@@ -152,7 +158,9 @@ def simulate_push(config: PushConfig) -> tuple[dict, PushTruth]:
             step_force.append(force)
             arm = np.array([point[0] - q[0], point[1] - q[1], 0.0])
             f3 = np.array([force[0], force[1], 0.0])
-            state.body_f.assign(np.array([[*f3, *np.cross(arm, f3)]], dtype=np.float32))
+            drag = -config.damping_n_s_m * np.array([qd[0], qd[1], 0.0])
+            turning = np.array([0.0, 0.0, -config.turning_damping_n_m_s * qd[5]])
+            state.body_f.assign(np.array([[*(f3 + drag), *(np.cross(arm, f3) + turning)]], dtype=np.float32))
             solver.step(state, nxt, None, contacts, config.dt_s)
             state, nxt = nxt, state
     data = {k: np.asarray(v, dtype=float) for k, v in out.items()}
@@ -196,7 +204,7 @@ def write_push(path: Path, config: PushConfig) -> PushTruth:
     write_recording(
         path,
         pose=PoseTrack(t, position, quat, "world", "block", "/tracker/block"),
-        wrench=WrenchTrack(t, force, np.zeros((n, 3)), "/pusher/wrench", "world"),
+        wrench=WrenchTrack(t + config.delay_s, force, np.zeros((n, 3)), "/pusher/wrench", "world"),
         contact=PointTrack(t, tip, "world", "/pusher/tip"),
     )
     return truth

@@ -48,12 +48,28 @@ def test_grad_mu_mass_izz_matches_central_difference():
     windows = _windows(3.0, 0.15)
     rollout = SlidingRollout(windows, _box(0.8), SlidingConfig())
     theta = np.array([0.35, 0.8, 0.0015])
-    _, grad, _ = rollout.loss_and_grad(theta)
+    _, grad, _, _ = rollout.loss_and_grad(theta)
     for i in range(3):
         e = np.zeros(3)
         e[i] = 1e-2 * theta[i]
         fd = (np.sum(rollout.residuals(theta + e) ** 2) - np.sum(rollout.residuals(theta - e) ** 2)) / (2 * e[i])
         assert grad[i] == pytest.approx(fd, rel=0.05, abs=1e-9), i
+
+
+def test_grad_of_force_offset_and_drag_matches_central_difference():
+    """The tape's gradient w.r.t. the effect vector (force offset x, y [N], drag [N s/m], turning drag
+    [N m s]) agrees with central differences, away from zero where the drag's sign matters."""
+    windows = _windows(3.0, 0.15)
+    rollout = SlidingRollout(windows, _box(0.8), SlidingConfig())
+    theta = np.array([0.35, 0.8, 0.0015])
+    effect = np.array([0.1, -0.05, 0.5, 1e-3])
+    _, _, _, grad = rollout.loss_and_grad(theta, None, effect)
+    for i, h in enumerate((0.02, 0.02, 0.1, 2e-4)):
+        e = np.zeros(4)
+        e[i] = h
+        plus = np.sum(rollout.residuals(theta, None, effect + e) ** 2)
+        minus = np.sum(rollout.residuals(theta, None, effect - e) ** 2)
+        assert grad[i] == pytest.approx((plus - minus) / (2 * h), rel=0.05, abs=1e-9), i
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,268 @@
+"""Diagnose a pushed object: what does the sliding model leave out?
+
+The sliding base model (pipelines/identify/sliding.py) is Coulomb friction of a
+uniformly loaded support face, driven by the measured pusher force (less the
+offset measured at the recording's zeros) at the measured contact point. Its
+candidates, each a term of the same Newton rollout:
+
+  sensor_bias:     a force offset still in the reading after the zeros
+                   (a drift, a load that depends on the arm's pose), world x, y
+  viscous_damping: -b v and -b_angular omega_z on the body: friction that grows
+                   with speed (velocity-strengthening surfaces, a dragged cable)
+  time_delay:      the wrench re-stamped against the poses (separate clocks)
+
+With three candidates there is no regression screen: each, alone, is refitted
+with mu and I_zz (and the windows' start velocities) on the training windows and
+replayed on the evaluation windows from measured starts, the held-out
+recordings' (or, without them, each half of every trial fitted on the other
+half). A candidate is chosen when it predicts those windows significantly
+better than the base model (`predicts_better`, per-window log error), the pair
+of the two best when it beats the better alone. Inclusion probabilities are
+the share of bootstrap resamples of the evaluation windows in which a candidate
+predicts better.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from itertools import combinations
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from assets import Effect, FitMetrics
+from pipelines.identify.noise import estimate_noise_levels
+from pipelines.identify.sliding import (
+    EFFECT_SLOTS, PlanarBody, PushWindows, SlidingConfig, SlidingFit, SlidingRollout, concat_push_windows,
+    estimate_force_bias, identify_sliding, push_windows,
+)
+
+from .residuals import analyse_planar_residual, describe
+from .screening import Screening
+from .select import DiagnoseConfig, Diagnosis, predicts_better
+
+PUSHED_CANDIDATES = ("sensor_bias", "viscous_damping", "time_delay")
+"""Candidates of the sliding kind, in the order they are tried."""
+
+
+@dataclass(frozen=True)
+class _Fold:
+    """Which windows train and which evaluate: per recording, a boolean mask over its windows."""
+
+    train: tuple[tuple[int, np.ndarray], ...]
+    test: tuple[tuple[int, np.ndarray], ...]
+
+
+@dataclass(frozen=True)
+class _Refit:
+    """A candidate set refitted on one fold: the fit, its delay [s], and its replay of the evaluation windows
+    from measured starts (residuals [S, W, 3]: x, y [m], heading x yaw length [m])."""
+
+    fit: SlidingFit
+    delay_s: float
+    test: PushWindows
+    residual: np.ndarray
+
+
+def _select(parts: list[PushWindows], picks) -> PushWindows:
+    def take(w: PushWindows, mask: np.ndarray) -> PushWindows:
+        return PushWindows(w.dt_s, w.substeps, w.t_start_s[mask], w.start[mask], w.force[:, mask],
+                           w.contact[:, mask], w.measured[:, mask])
+
+    return concat_push_windows([take(parts[i], mask) for i, mask in picks if mask.any()])
+
+
+def _folds(parts: list[PushWindows], trials: int) -> list[_Fold]:
+    """The held-out recordings (indices from `trials` on) evaluate a fit on every trial; without them, the
+    first half of each trial's windows (in time) and the second half evaluate each other."""
+    if len(parts) > trials:
+        everything = lambda idx: tuple((i, np.ones(parts[i].window_count, bool)) for i in idx)  # noqa: E731
+        return [_Fold(everything(range(trials)), everything(range(trials, len(parts))))]
+    first = tuple((i, np.arange(parts[i].window_count) < parts[i].window_count / 2) for i in range(trials))
+    second = tuple((i, ~mask) for i, mask in first)
+    if not any(m.any() for _, m in first) or not any(m.any() for _, m in second):
+        raise ValueError("diagnose: the trials hold a single push window; give --holdout to diagnose them")
+    return [_Fold(first, second), _Fold(second, first)]
+
+
+def _window_mse(residual: np.ndarray) -> np.ndarray:
+    """Mean squared replay error per window [m^2] (position and heading arc)."""
+    return np.mean(np.sum(residual**2, axis=-1), axis=0)
+
+
+def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: float,
+                    sconfig: SlidingConfig = SlidingConfig(), config: DiagnoseConfig = DiagnoseConfig(),
+                    free: tuple[bool, bool, bool] = (True, False, True)) -> tuple[Diagnosis, SlidingFit | None]:
+    """Diagnose a pushed object from `trials`; `holdouts` (recordings, possibly none) choose and validate.
+
+    body, mu_prior: the sliding model's prior (as in identify_pushed); free: which of (mu, m, I_zz) every
+    refit frees (the mass keeps its prior by default, see SlidingConfig.fit_mass). Times in the analysis
+    are from each recording's first pose.
+
+    Returns (Diagnosis, the sliding fit on all trials with the chosen effects, or None if none is chosen).
+    """
+    rng = np.random.default_rng(config.seed)
+    recordings = [*trials, *holdouts]
+    biases = [estimate_force_bias(r, sconfig) for r in recordings]
+    windows_at: dict[float, list[PushWindows]] = {}
+
+    def parts(delay_s: float) -> list[PushWindows]:
+        if delay_s not in windows_at:
+            windows_at[delay_s] = [
+                replace(w, t_start_s=w.t_start_s - r.pose.t_s[0])
+                for r, b in zip(recordings, biases) for w in [push_windows(r, body, sconfig, b, delay_s=delay_s)]]
+        return windows_at[delay_s]
+
+    folds = _folds(parts(0.0), len(trials))
+    search = replace(sconfig, max_iterations=max(10, sconfig.max_iterations // 2))
+
+    def fit(names: tuple, train, delay_s: float, settings: SlidingConfig = sconfig) -> SlidingFit:
+        additive = tuple(n for n in names if n in EFFECT_SLOTS)
+        return identify_sliding(_select(parts(delay_s), train), body, settings, mu_prior=mu_prior, free=free,
+                                effects=additive)
+
+    def training_error(f: SlidingFit, length: float) -> float:
+        return f.rmse_position_m**2 + (f.rmse_heading_rad * length) ** 2
+
+    length = sconfig.yaw_length_m or float(np.hypot(*body.half_extents_m[:2]))
+    refits: dict[tuple, list[_Refit]] = {}
+
+    def evaluate(names: tuple) -> np.ndarray:
+        """Per-window held-out errors of `names` refitted on each fold's training windows."""
+        if names not in refits:
+            out = []
+            for fold in folds:
+                delay = 0.0
+                if "time_delay" in names:  # a scalar search, every point a (shorter) refit of the rest
+                    delay = float(minimize_scalar(
+                        lambda d: training_error(fit(names, fold.train, round(d, 4), search), length),
+                        bounds=(-config.max_delay_s, config.max_delay_s), method="bounded",
+                        options={"xatol": 1e-3}).x)
+                    delay = round(delay, 4)
+                f = fit(names, fold.train, delay)
+                test = _select(parts(delay), fold.test)
+                residual = SlidingRollout(test, body, sconfig).residuals(f.theta, None, f.effect)
+                out.append(_Refit(f, delay, test, residual))
+            refits[names] = out
+        return np.concatenate([_window_mse(r.residual) for r in refits[names]])
+
+    base = evaluate(())
+    passing = sorted((c for c in PUSHED_CANDIDATES if predicts_better(evaluate((c,)), base)),
+                     key=lambda c: evaluate((c,)).sum())
+    best: tuple = (passing[0],) if passing else ()
+    if len(passing) >= 2:
+        pair = tuple(c for c in PUSHED_CANDIDATES if c in passing[:2])
+        if predicts_better(evaluate(pair), evaluate(best)):
+            best = pair
+    for names in combinations(passing[:2], 2):
+        evaluate(tuple(c for c in PUSHED_CANDIDATES if c in names))
+    scores = {"+".join(k) or "none": float(evaluate(k).mean()) for k in refits}
+
+    # inclusion: the share of bootstrap resamples of the evaluation windows a candidate predicts better in
+    gains = {c: np.log(np.maximum(evaluate((c,)), 1e-300)) - np.log(np.maximum(base, 1e-300))
+             for c in PUSHED_CANDIDATES}
+    picks = rng.integers(0, len(base), (config.bootstraps, len(base)))
+    inclusion = {c: float(np.mean(g[picks].mean(axis=1) < 0)) for c, g in gains.items()}
+
+    final = fit(best, tuple((i, np.ones(p.window_count, bool)) for i, p in enumerate(parts(0.0)[:len(trials)])),
+                _delay(refits[best])) if best else None
+    effects = []
+    for name in best:
+        params, evidence = _effect_params(name, final, _delay(refits[best]), trials[0])
+        effects.append(Effect(name, params, {
+            **evidence, "inclusion_probability": inclusion[name],
+            "belongs": "recording" if name in ("sensor_bias", "time_delay") else "object",
+            "heldout_mse_m2": {"none": scores["none"], name: scores[name], "chosen": scores["+".join(best)]},
+        }))
+
+    before, after = refits[()], refits[best]
+    fits = {"before": _metrics(before, length), "after": _metrics(after, length)}
+    for e in effects:
+        e.evidence.update({"heldout_rmse_position_before_m": fits["before"].rmse_position_m,
+                           "heldout_rmse_position_after_m": fits["after"].rmse_position_m})
+    noise = estimate_noise_levels(recordings[-1].pose.t_s, recordings[-1].pose.position,
+                                  recordings[-1].pose.quat_xyzw, recordings[-1].wrench.t_s,
+                                  recordings[-1].wrench.force, recordings[-1].wrench.torque).position_m
+    series = {k: _series(v, sconfig, length) for k, v in (("before", before), ("after", after))}
+    residuals = {k: analyse_planar_residual(s["t_s"], s["velocity"], s["force"], s["residual"] / noise,
+                                            window_samples=before[0].test.sample_count)
+                 for k, s in series.items()}
+    unexplained = tuple(
+        {"summary": s["summary"], "where": s["where"], "share": s["share"]}
+        for s in residuals["after"].localisation
+        if s["share"] >= config.unexplained_share and min(residuals["after"].whiteness_p) < 1e-6
+    )
+    traces = {"t_s": series["before"]["t_s"].tolist(),
+              "measured_position": series["before"]["measured"].tolist(),
+              "before_position": (series["before"]["measured"] + series["before"]["position_error"]).tolist(),
+              "after_position": (series["after"]["measured"] + series["after"]["position_error"]).tolist(),
+              "window_s": before[0].test.sample_count * sconfig.sample_period_s,
+              "residual_t_s": series["before"]["t_s"].tolist(),
+              "residual_before": (series["before"]["residual"] / noise).tolist(),
+              "residual_after": (series["after"]["residual"] / noise).tolist()}
+    screening = Screening(inclusion, tuple(passing),
+                          {n: _effect_params(n, refits[(n,)][0].fit, _delay(refits[(n,)]), trials[0])[0]
+                           for n in PUSHED_CANDIDATES}, config.bootstraps)
+    diagnosis = Diagnosis(
+        effects=tuple(effects), unexplained=unexplained, screening=screening, scores=scores, fits=fits,
+        residuals=residuals, findings=tuple(describe(residuals["before"])), inertial={},
+        heldout=bool(holdouts), traces=traces,
+    )
+    return diagnosis, final
+
+
+def _delay(refits: list[_Refit]) -> float:
+    """The candidate set's delay over its folds [s] (0 without time_delay)."""
+    return float(np.mean([r.delay_s for r in refits]))
+
+
+def _effect_params(name: str, fit: SlidingFit, delay_s: float, recording) -> tuple[dict, dict]:
+    """DESIGN.md parameters of `name` from a fit that carried it, and evidence (standard deviations, frames)."""
+    if name == "time_delay":
+        return {"seconds": delay_s}, {}
+    x, y = EFFECT_SLOTS[name]
+    if name == "viscous_damping":
+        return ({"b": float(fit.effect[x]), "b_angular": float(fit.effect[y])},
+                {"std": {"b": float(fit.effect_std[x]), "b_angular": float(fit.effect_std[y])}})
+    world = np.array([fit.effect[x], fit.effect[y], 0.0])
+    # DESIGN.md: a sensor bias is in the wrench message's frame. The sensor-to-world map is fitted over the
+    # recording (the reading's sign included, e.g. a reaction); it holds where the sensor does not turn.
+    raw, resolved = recording.wrench_raw.force, recording.wrench.force
+    M, *_ = np.linalg.lstsq(raw, resolved, rcond=None)
+    frame = recording.wrench_raw.frame_id or "world"
+    fixed = float(np.sqrt(np.mean((raw @ M - resolved) ** 2))) < 0.05 * float(np.std(resolved)) + 1e-9
+    force = np.linalg.solve(M.T, world) if fixed else world
+    return ({"force": force.tolist(), "torque": [0.0, 0.0, 0.0]},
+            {"frame": frame if fixed else "world", "force_world_n": world.tolist(),
+             "std_world_n": [float(fit.effect_std[x]), float(fit.effect_std[y])],
+             "note": "the offset left after the zeros' (provenance identify.force_bias_world); the vertical "
+                     "part and the torque are not seen by a planar push"})
+
+
+def _metrics(refits: list[_Refit], length: float) -> FitMetrics:
+    r = np.concatenate([x.residual for x in refits], axis=1)
+    return FitMetrics(rmse_position_m=float(np.sqrt(np.mean(np.sum(r[..., :2] ** 2, -1)))),
+                      rmse_rotation_rad=float(np.sqrt(np.mean(r[..., 2] ** 2)) / length),
+                      loss=float(np.mean(np.sum(r**2, -1))))
+
+
+def _series(refits: list[_Refit], sconfig: SlidingConfig, length: float) -> dict:
+    """The replay of the evaluation windows as time series, sorted by time: t [s], measured position (x, y, 0),
+    position error, the planar residual [x, y, heading arc] [m], the object's velocity (vx, vy [m/s],
+    yaw rate [rad/s]) and the pusher force (x, y [N]) at each sample."""
+    rows = []
+    for x in refits:
+        w, r = x.test, x.residual
+        S = w.sample_count
+        t = w.t_start_s[None, :] + sconfig.sample_period_s * np.arange(1, S + 1)[:, None]
+        rate = np.gradient(w.measured, sconfig.sample_period_s, axis=0)[1:]
+        force = w.force[w.substeps - 1::w.substeps][:S]
+        rows.append((t.T.ravel(), w.measured[1:].transpose(1, 0, 2).reshape(-1, 3),
+                     r.transpose(1, 0, 2).reshape(-1, 3), rate.transpose(1, 0, 2).reshape(-1, 3),
+                     force.transpose(1, 0, 2).reshape(-1, 2)))
+    t, measured, residual, velocity, force = (np.concatenate(c) for c in zip(*rows))
+    order = np.argsort(t, kind="stable")
+    position = np.c_[measured[:, :2], np.zeros(len(t))][order]
+    error = np.c_[residual[:, :2], np.zeros(len(t))][order]
+    return {"t_s": t[order], "measured": position, "position_error": error, "residual": residual[order],
+            "velocity": velocity[order], "force": force[order]}
