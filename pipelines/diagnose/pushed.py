@@ -9,7 +9,8 @@ candidates, each a term of the same Newton rollout:
                    (a drift, a load that depends on the arm's pose), world x, y
   viscous_damping: -b v and -b_angular omega_z on the body: friction that grows
                    with speed (velocity-strengthening surfaces, a dragged cable)
-  time_delay:      the wrench re-stamped against the poses (separate clocks)
+  time_delay:      the wrench's clock against the poses' (separate clocks), the force
+                   read between steps so that the delay has a gradient
 
 With three candidates there is no regression screen: each, alone, is refitted
 with mu and I_zz (and the windows' start velocities) on the training windows and
@@ -26,9 +27,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from itertools import combinations
+from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from assets import Effect, FitMetrics
 from pipelines.identify.noise import estimate_noise_levels
@@ -55,19 +56,20 @@ class _Fold:
 
 @dataclass(frozen=True)
 class _Refit:
-    """A candidate set refitted on one fold: the fit, its delay [s], and its replay of the evaluation windows
-    from measured starts (residuals [S, W, 3]: x, y [m], heading x yaw length [m])."""
+    """A candidate set refitted on one fold: the fit and its replay of the evaluation windows from measured
+    starts (residuals [S, W, 3]: x, y [m], heading x yaw length [m]; recording [W]: the index of each
+    window's recording)."""
 
     fit: SlidingFit
-    delay_s: float
     test: PushWindows
     residual: np.ndarray
+    recording: np.ndarray
 
 
 def _select(parts: list[PushWindows], picks) -> PushWindows:
     def take(w: PushWindows, mask: np.ndarray) -> PushWindows:
         return PushWindows(w.dt_s, w.substeps, w.t_start_s[mask], w.start[mask], w.force[:, mask],
-                           w.contact[:, mask], w.measured[:, mask])
+                           w.contact[:, mask], w.measured[:, mask], w.force_margin)
 
     return concat_push_windows([take(parts[i], mask) for i, mask in picks if mask.any()])
 
@@ -104,25 +106,14 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     rng = np.random.default_rng(config.seed)
     recordings = [*trials, *holdouts]
     biases = [estimate_force_bias(r, sconfig) for r in recordings]
-    windows_at: dict[float, list[PushWindows]] = {}
+    sconfig = replace(sconfig, max_delay_s=config.max_delay_s)
+    # each recording's windows, timed from its first pose
+    parts = [replace(w, t_start_s=w.t_start_s - r.pose.t_s[0])
+             for r, b in zip(recordings, biases) for w in [push_windows(r, body, sconfig, b)]]
+    folds = _folds(parts, len(trials))
 
-    def parts(delay_s: float) -> list[PushWindows]:
-        if delay_s not in windows_at:
-            windows_at[delay_s] = [
-                replace(w, t_start_s=w.t_start_s - r.pose.t_s[0])
-                for r, b in zip(recordings, biases) for w in [push_windows(r, body, sconfig, b, delay_s=delay_s)]]
-        return windows_at[delay_s]
-
-    folds = _folds(parts(0.0), len(trials))
-    search = replace(sconfig, max_iterations=max(10, sconfig.max_iterations // 2))
-
-    def fit(names: tuple, train, delay_s: float, settings: SlidingConfig = sconfig) -> SlidingFit:
-        additive = tuple(n for n in names if n in EFFECT_SLOTS)
-        return identify_sliding(_select(parts(delay_s), train), body, settings, mu_prior=mu_prior, free=free,
-                                effects=additive)
-
-    def training_error(f: SlidingFit, length: float) -> float:
-        return f.rmse_position_m**2 + (f.rmse_heading_rad * length) ** 2
+    def fit(names: tuple, train) -> SlidingFit:
+        return identify_sliding(_select(parts, train), body, sconfig, mu_prior=mu_prior, free=free, effects=names)
 
     length = sconfig.yaw_length_m or float(np.hypot(*body.half_extents_m[:2]))
     refits: dict[tuple, list[_Refit]] = {}
@@ -132,17 +123,11 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
         if names not in refits:
             out = []
             for fold in folds:
-                delay = 0.0
-                if "time_delay" in names:  # a scalar search, every point a (shorter) refit of the rest
-                    delay = float(minimize_scalar(
-                        lambda d: training_error(fit(names, fold.train, round(d, 4), search), length),
-                        bounds=(-config.max_delay_s, config.max_delay_s), method="bounded",
-                        options={"xatol": 1e-3}).x)
-                    delay = round(delay, 4)
-                f = fit(names, fold.train, delay)
-                test = _select(parts(delay), fold.test)
+                f = fit(names, fold.train)
+                test = _select(parts, fold.test)
                 residual = SlidingRollout(test, body, sconfig).residuals(f.theta, None, f.effect)
-                out.append(_Refit(f, delay, test, residual))
+                source = np.concatenate([np.full(mask.sum(), i) for i, mask in fold.test])
+                out.append(_Refit(f, test, residual, source))
             refits[names] = out
         return np.concatenate([_window_mse(r.residual) for r in refits[names]])
 
@@ -164,11 +149,11 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     picks = rng.integers(0, len(base), (config.bootstraps, len(base)))
     inclusion = {c: float(np.mean(g[picks].mean(axis=1) < 0)) for c, g in gains.items()}
 
-    final = fit(best, tuple((i, np.ones(p.window_count, bool)) for i, p in enumerate(parts(0.0)[:len(trials)])),
-                _delay(refits[best])) if best else None
+    final = fit(best, tuple((i, np.ones(p.window_count, bool)) for i, p in enumerate(parts[:len(trials)]))) \
+        if best else None
     effects = []
     for name in best:
-        params, evidence = _effect_params(name, final, _delay(refits[best]), trials[0])
+        params, evidence = _effect_params(name, final, trials[0])
         effects.append(Effect(name, params, {
             **evidence, "inclusion_probability": inclusion[name],
             "belongs": "recording" if name in ("sensor_bias", "time_delay") else "object",
@@ -183,9 +168,11 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     noise = estimate_noise_levels(recordings[-1].pose.t_s, recordings[-1].pose.position,
                                   recordings[-1].pose.quat_xyzw, recordings[-1].wrench.t_s,
                                   recordings[-1].wrench.force, recordings[-1].wrench.torque).position_m
-    series = {k: _series(v, sconfig, length) for k, v in (("before", before), ("after", after))}
+    names = np.array([Path(r.path).name for r in recordings])
+    series = {k: _series(v, sconfig) for k, v in (("before", before), ("after", after))}
     residuals = {k: analyse_planar_residual(s["t_s"], s["velocity"], s["force"], s["residual"] / noise,
-                                            window_samples=before[0].test.sample_count)
+                                            window_samples=before[0].test.sample_count,
+                                            recordings=names[s["recording"]])
                  for k, s in series.items()}
     unexplained = tuple(
         {"summary": s["summary"], "where": s["where"], "share": s["share"]}
@@ -201,8 +188,8 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
               "residual_before": (series["before"]["residual"] / noise).tolist(),
               "residual_after": (series["after"]["residual"] / noise).tolist()}
     screening = Screening(inclusion, tuple(passing),
-                          {n: _effect_params(n, refits[(n,)][0].fit, _delay(refits[(n,)]), trials[0])[0]
-                           for n in PUSHED_CANDIDATES}, config.bootstraps)
+                          {n: _effect_params(n, refits[(n,)][0].fit, trials[0])[0] for n in PUSHED_CANDIDATES},
+                          config.bootstraps)
     diagnosis = Diagnosis(
         effects=tuple(effects), unexplained=unexplained, screening=screening, scores=scores, fits=fits,
         residuals=residuals, findings=tuple(describe(residuals["before"])), inertial={},
@@ -211,15 +198,11 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     return diagnosis, final
 
 
-def _delay(refits: list[_Refit]) -> float:
-    """The candidate set's delay over its folds [s] (0 without time_delay)."""
-    return float(np.mean([r.delay_s for r in refits]))
-
-
-def _effect_params(name: str, fit: SlidingFit, delay_s: float, recording) -> tuple[dict, dict]:
+def _effect_params(name: str, fit: SlidingFit, recording) -> tuple[dict, dict]:
     """DESIGN.md parameters of `name` from a fit that carried it, and evidence (standard deviations, frames)."""
     if name == "time_delay":
-        return {"seconds": delay_s}, {}
+        (k,) = EFFECT_SLOTS[name]
+        return {"seconds": float(fit.effect[k])}, {"std": {"seconds": float(fit.effect_std[k])}}
     x, y = EFFECT_SLOTS[name]
     if name == "viscous_damping":
         return ({"b": float(fit.effect[x]), "b_angular": float(fit.effect[y])},
@@ -246,23 +229,22 @@ def _metrics(refits: list[_Refit], length: float) -> FitMetrics:
                       loss=float(np.mean(np.sum(r**2, -1))))
 
 
-def _series(refits: list[_Refit], sconfig: SlidingConfig, length: float) -> dict:
-    """The replay of the evaluation windows as time series, sorted by time: t [s], measured position (x, y, 0),
-    position error, the planar residual [x, y, heading arc] [m], the object's velocity (vx, vy [m/s],
-    yaw rate [rad/s]) and the pusher force (x, y [N]) at each sample."""
+def _series(refits: list[_Refit], sconfig: SlidingConfig) -> dict:
+    """The replay of the evaluation windows as time series, window after window: t [s] (each recording's own
+    time), measured position (x, y, 0), position error, the planar residual [x, y, heading arc] [m], the
+    object's velocity (vx, vy [m/s], yaw rate [rad/s]), the pusher force (x, y [N]) and the recording's
+    index at each sample."""
     rows = []
     for x in refits:
         w, r = x.test, x.residual
         S = w.sample_count
         t = w.t_start_s[None, :] + sconfig.sample_period_s * np.arange(1, S + 1)[:, None]
         rate = np.gradient(w.measured, sconfig.sample_period_s, axis=0)[1:]
-        force = w.force[w.substeps - 1::w.substeps][:S]
+        force = w.window_force[w.substeps - 1::w.substeps][:S]
         rows.append((t.T.ravel(), w.measured[1:].transpose(1, 0, 2).reshape(-1, 3),
                      r.transpose(1, 0, 2).reshape(-1, 3), rate.transpose(1, 0, 2).reshape(-1, 3),
-                     force.transpose(1, 0, 2).reshape(-1, 2)))
-    t, measured, residual, velocity, force = (np.concatenate(c) for c in zip(*rows))
-    order = np.argsort(t, kind="stable")
-    position = np.c_[measured[:, :2], np.zeros(len(t))][order]
-    error = np.c_[residual[:, :2], np.zeros(len(t))][order]
-    return {"t_s": t[order], "measured": position, "position_error": error, "residual": residual[order],
-            "velocity": velocity[order], "force": force[order]}
+                     force.transpose(1, 0, 2).reshape(-1, 2), np.repeat(x.recording, S)))
+    t, measured, residual, velocity, force, recording = (np.concatenate(c) for c in zip(*rows))
+    return {"t_s": t, "measured": np.c_[measured[:, :2], np.zeros(len(t))],
+            "position_error": np.c_[residual[:, :2], np.zeros(len(t))], "residual": residual,
+            "velocity": velocity, "force": force, "recording": recording}

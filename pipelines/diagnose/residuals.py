@@ -130,13 +130,15 @@ def analyse_joint_residual(t_s: np.ndarray, q: np.ndarray, qd: np.ndarray, effor
 
 
 def analyse_planar_residual(t_s: np.ndarray, velocity: np.ndarray, force: np.ndarray, residual: np.ndarray, *,
-                            window_samples: int, block_s: float = 0.25, excess: float = 4.0) -> ResidualAnalysis:
+                            window_samples: int, recordings: np.ndarray | None = None, block_s: float = 0.25,
+                            excess: float = 4.0) -> ResidualAnalysis:
     """Analyse a pushed object's replay errors [N, 3] (x, y, heading arc; tracker-noise units), window by window.
 
     Rows run through windows of `window_samples` samples, each replayed from a measured start; velocity [N, 3]:
     vx, vy [m/s], yaw rate [rad/s]; force [N, 2]: the pusher's, world x, y [N]. The error accumulates within a
     window, so whiteness is tested on the windows' final errors, and correlations and the cross-correlation
     with the force on its per-sample increments (what each step adds: force and state errors act there).
+    recordings: per row, the recording's name (t_s is each recording's own time).
     """
     S = window_samples
     increments = np.diff(np.concatenate([np.zeros((len(residual) // S, 1, 3)), residual.reshape(-1, S, 3)], 1),
@@ -156,27 +158,42 @@ def analyse_planar_residual(t_s: np.ndarray, velocity: np.ndarray, force: np.nda
         xcorr_peak=[p for _, p in lags],
         correlation={k: [_pearson(increments[:, j], f[:, j]) for j in range(3)] for k, f in features.items()},
         localisation=_localise(t_s, energy, np.sum(residual**2, axis=1), np.linalg.norm(velocity[:, :2], axis=1),
-                               excess, what="replay error"),
+                               excess, what="replay error", recordings=recordings),
         channels=PLANAR_CHANNELS,
     )
 
 
 def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndarray, excess: float,
-              speed_name: str = "|v|", speed_unit: str = "m/s", what: str = "wrench residual") -> list[dict]:
-    """Stretches where the smoothed residual energy exceeds `excess` x its median, largest share first."""
+              speed_name: str = "|v|", speed_unit: str = "m/s", what: str = "wrench residual",
+              recordings: np.ndarray | None = None) -> list[dict]:
+    """Stretches where the smoothed residual energy exceeds `excess` x its median, largest share first.
+
+    recordings: per sample, the name of the recording it comes from (several evaluation recordings run one
+    after another, each with its own clock): a stretch ends where the recording does, and says which it is.
+    """
     level = excess * np.median(energy)
-    hot = energy > level
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], hot.astype(int), [0]])))
+    hot = (energy > level).astype(int)
+    if recordings is not None:  # a change of recording ends a stretch
+        hot = np.where(np.r_[False, recordings[1:] != recordings[:-1]] & (hot > 0), 2, hot)
+    starts = np.flatnonzero((hot > 0) & (np.r_[0, hot[:-1]] == 0) | (hot == 2))
     total = raw.sum()
     out = []
-    for a, b in zip(edges[::2], edges[1::2]):
+    for a in starts:
+        b = a + 1
+        while b < len(hot) and hot[b] == 1:
+            b += 1
         share = float(raw[a:b].sum() / total) if total > 0 else 0.0
         lo, hi = float(speed[a:b].min()), float(speed[a:b].max())
         ratio = float(np.sqrt(energy[a:b].max() / max(np.median(energy), 1e-30)))
+        where = {"t_s": [float(t[a]), float(t[b - 1])], "speed": [lo, hi]}
+        source = ""
+        if recordings is not None:
+            where["recording"] = str(recordings[a])
+            source = f" of {recordings[a]}"
         out.append({
-            "summary": f"{what} up to {ratio:.1f}x its typical size at t = {t[a]:.2f}-{t[b - 1]:.2f} s, "
+            "summary": f"{what} up to {ratio:.1f}x its typical size at t = {t[a]:.2f}-{t[b - 1]:.2f} s{source}, "
                        f"{speed_name} = {lo:.2f}-{hi:.2f} {speed_unit} ({100 * share:.0f} % of the residual)",
-            "where": {"t_s": [float(t[a]), float(t[b - 1])], "speed": [lo, hi]},
+            "where": where,
             "share": share,
         })
     return sorted(out, key=lambda d: -d["share"])

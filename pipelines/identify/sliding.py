@@ -121,6 +121,8 @@ class SlidingConfig:
     """Static sink of the face under the object's weight [m]: sets the normal stiffness m g / sink,
     so the contact's frequency sqrt(g / sink) is the same for any mass."""
     contact_damping_ratio: float = 0.7
+    max_delay_s: float = 0.05
+    """The force is kept this far beyond each window's ends: the range a time delay is fitted over [s]."""
     fit_mass: bool = False
     """Fit the mass too. Pushes determine mu m through the force balance; the split rests on the
     accelerations, which 5 ms of force-to-pose timing error moves by about 10 % (twin bench push),
@@ -133,7 +135,8 @@ class PushWindows:
 
     dt_s, substeps: simulation step [s] and steps per pose sample.
     t_start_s [W]; start [W, 6]: x, y [m], yaw [rad], vx, vy [m/s], yaw rate [rad/s];
-    force [steps, W, 2]: pusher force on the object, world x, y [N] (bias removed);
+    force [margin + steps + margin, W, 2]: pusher force on the object, world x, y [N] (bias removed),
+    from `force_margin` steps before each window to as many after it (the room a time delay is fitted in);
     contact [steps, W, 2]: its point of application, world x, y [m];
     measured [S+1, W, 3]: x, y [m], yaw [rad] (continuous, not wrapped).
     """
@@ -145,6 +148,7 @@ class PushWindows:
     force: np.ndarray
     contact: np.ndarray
     measured: np.ndarray
+    force_margin: int = 0
 
     @property
     def window_count(self) -> int:
@@ -152,7 +156,12 @@ class PushWindows:
 
     @property
     def step_count(self) -> int:
-        return self.force.shape[0]
+        return self.contact.shape[0]
+
+    @property
+    def window_force(self) -> np.ndarray:
+        """The force at the window's own steps [steps, W, 2]."""
+        return self.force[self.force_margin:self.force_margin + self.step_count]
 
     @property
     def sample_count(self) -> int:
@@ -278,13 +287,13 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
 
 
 def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: ForceBias | None = None,
-                 moving_only: bool = True, delay_s: float = 0.0) -> PushWindows:
+                 moving_only: bool = True) -> PushWindows:
     """Back-to-back windows over the part of `recording` where the pusher touches the object.
 
     The force is the recording's world-axes wrench force minus `bias` at its stamps; the contact
     point is the recording's contact track (required: a push is a force at a point).
-    With moving_only, windows where the object does not slide are left out. delay_s: the wrench
-    stamped t acted at t - delay_s (DESIGN.md time_delay).
+    With moving_only, windows where the object does not slide are left out. The force is kept
+    config.max_delay_s beyond each window's ends, the range a time delay is fitted over.
     """
     if recording.contact is None:
         raise ValueError(
@@ -317,8 +326,10 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: Force
     starts = np.asarray(starts)
     w = recording.wrench
     force = w.force[:, :2] - (bias.at(w.t_s)[:, :2] if bias is not None else 0.0)  # unfiltered: noise averages out
+    margin = int(np.ceil(config.max_delay_s / dt)) + 1
     t_step = grid[starts][None, :] + dt * np.arange(samples * substeps)[:, None]
-    f = np.stack([np.interp(t_step, w.t_s - delay_s, force[:, k]) for k in range(2)], axis=-1)
+    t_force = grid[starts][None, :] + dt * np.arange(-margin, samples * substeps + margin)[:, None]
+    f = np.stack([np.interp(t_force, w.t_s, force[:, k]) for k in range(2)], axis=-1)
     p = np.stack([np.interp(t_step, c.t_s, c.position[:, k]) for k in range(2)], axis=-1)
     rot = Rotation.from_rotvec(np.c_[np.zeros((len(yaw), 2)), yaw])
     pos3 = np.c_[xy, np.zeros(len(grid))]
@@ -328,14 +339,15 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: Force
         start.append([xy[s, 0], xy[s, 1], yaw[s], twist[0], twist[1], twist[5]])
     idx = starts[None, :] + np.arange(samples + 1)[:, None]
     measured = np.stack([xy[idx, 0], xy[idx, 1], yaw[idx]], axis=-1)
-    return PushWindows(dt, substeps, grid[starts], np.asarray(start), f, p, measured)
+    return PushWindows(dt, substeps, grid[starts], np.asarray(start), f, p, measured, margin)
 
 
 def concat_push_windows(parts: list[PushWindows]) -> PushWindows:
     """Windows of several recordings as one batch (same step, substeps and length)."""
     first = parts[0]
     for p in parts[1:]:
-        if (p.substeps, p.step_count) != (first.substeps, first.step_count) or abs(p.dt_s - first.dt_s) > 1e-6:
+        if ((p.substeps, p.step_count, p.force_margin) != (first.substeps, first.step_count, first.force_margin)
+                or abs(p.dt_s - first.dt_s) > 1e-6):
             raise ValueError("recordings differ in pose rate; their windows cannot share one batch")
     return PushWindows(
         first.dt_s, first.substeps,
@@ -344,6 +356,7 @@ def concat_push_windows(parts: list[PushWindows]) -> PushWindows:
         np.concatenate([p.force for p in parts], axis=1),
         np.concatenate([p.contact for p in parts], axis=1),
         np.concatenate([p.measured for p in parts], axis=1),
+        first.force_margin,
     )
 
 
@@ -402,27 +415,35 @@ def apply_pusher_force(
     body_com: wp.array[wp.vec3],
     force: wp.array2d[wp.vec2],
     contact: wp.array2d[wp.vec2],
+    effect: wp.array[float],
     step: int,
+    margin: int,
+    dt: float,
     body_f: wp.array[wp.spatial_vector],
 ):
     """Horizontal pusher force [N] at the contact point (x, y) [m], taken at the COM's height.
 
     The height at which a pusher meets the object only tilts it (SemiImplicit
     would rock the box on its contacts); the planar motion needs the in-plane moment.
+    effect[4] is the wrench's delay d [s] (DESIGN.md time_delay: stamped t, it acted at t - d), so
+    the force acting now was read d later: interpolated between steps, so d has a gradient.
     """
     w = wp.tid()
     X = body_q[w]
     c = wp.transform_point(X, body_com[w])
-    f2 = force[step, w]
+    at = float(step + margin) + effect[4] / dt
+    i = wp.clamp(int(wp.floor(at)), 0, force.shape[0] - 2)
+    a = wp.clamp(at - float(i), 0.0, 1.0)
+    f2 = force[i, w] * (1.0 - a) + force[i + 1, w] * a
     p2 = contact[step, w]
     f = wp.vec3(f2[0], f2[1], 0.0)
     arm = wp.vec3(p2[0] - c[0], p2[1] - c[1], 0.0)
     body_f[w] = wp.spatial_vector(f, wp.cross(arm, f))
 
 
-EFFECT_SLOTS = {"sensor_bias": (0, 1), "viscous_damping": (2, 3)}
-"""Where each additive effect's parameters sit in the rollout's effect vector (see apply_sliding_effects)."""
-EFFECT_SIZE = 4
+EFFECT_SLOTS = {"sensor_bias": (0, 1), "viscous_damping": (2, 3), "time_delay": (4,)}
+"""Where each effect's parameters sit in the rollout's effect vector (apply_sliding_effects, apply_pusher_force)."""
+EFFECT_SIZE = 5
 
 
 @wp.kernel
@@ -543,7 +564,8 @@ class SlidingRollout:
         for step in range(w.step_count):
             s, s_next = self.states[step], self.states[step + 1]
             wp.launch(apply_pusher_force, dim=w.window_count,
-                      inputs=[s.body_q, model.body_com, self.force, self.contact, step],
+                      inputs=[s.body_q, model.body_com, self.force, self.contact, self.effect, step,
+                              w.force_margin, w.dt_s],
                       outputs=[s.body_f], device=self.device)
             wp.launch(apply_sliding_effects, dim=w.window_count, inputs=[s.body_qd, self.effect], outputs=[s.body_f],
                       device=self.device)
@@ -648,11 +670,14 @@ def replay_errors(rollout: SlidingRollout, theta, correction=None, effect=None) 
     )
 
 
-_EFFECT_SCALE = np.array([0.05, 0.05, 0.5, 1e-3])
-"""Typical sizes of the effect slots (force offset [N], drag [N s/m], turning drag [N m s]): the
-optimiser's units."""
-_EFFECT_BOUNDS = ((-5.0, 5.0), (-5.0, 5.0), (0.0, 50.0), (0.0, 0.5))
-"""Drag is passive: it only takes energy out."""
+_EFFECT_SCALE = np.array([0.05, 0.05, 0.5, 1e-3, 0.005])
+"""Typical sizes of the effect slots (force offset [N], drag [N s/m], turning drag [N m s], delay [s]):
+the optimiser's units."""
+
+
+def _effect_bounds(config: SlidingConfig) -> tuple:
+    """Drag is passive (it only takes energy out); a delay stays within the force kept beyond the windows."""
+    return (-5.0, 5.0), (-5.0, 5.0), (0.0, 50.0), (0.0, 0.5), (-config.max_delay_s, config.max_delay_s)
 
 
 def identify_sliding(
@@ -717,7 +742,7 @@ def identify_sliding(
     # then again at the residual level that fit leaves
     x = np.concatenate([prior[free_idx], np.zeros(len(slots)), np.zeros(3 * W)])
     bounds = (list(zip(lo[free_idx], hi[free_idx]))
-              + [(a / sc, b / sc) for a, b, sc in ((*_EFFECT_BOUNDS[j], _EFFECT_SCALE[j]) for j in slots)]
+              + [(a / sc, b / sc) for a, b, sc in ((*_effect_bounds(config)[j], _EFFECT_SCALE[j]) for j in slots)]
               + [(-20.0, 20.0)] * (3 * W))
     sigma2 = (1e-3) ** 2
     for _ in range(2):
@@ -777,7 +802,7 @@ def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bi
     reads high while the object accelerates and low while it turns.
     """
     windows = push_windows(recording, body, config, bias)
-    f = np.linalg.norm(windows.force, axis=-1).ravel()
+    f = np.linalg.norm(windows.window_force, axis=-1).ravel()
     pressing = f > 0.25 * np.percentile(f, 90)
     return float(np.median(f[pressing]) / (mass_kg * GRAVITY_M_S2))
 

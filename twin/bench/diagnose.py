@@ -400,7 +400,9 @@ def bench_diagnose_push_real(blocks: tuple[str, ...] = (), seed: int = 0) -> lis
         rows.append(row)
         print(f"{block.folder}: fitted {', '.join(row['fitted'])}; held out {', '.join(row['held_out'])}"
               + (f"; skipped (no sliding window) {', '.join(skipped)}" if skipped else ""), flush=True)
-        print(f"  found: {_format_effects(row['effects']) or 'none'}")
+        world = {n: e["force_world_n"] for n, e in row["evidence"].items() if "force_world_n" in e}
+        print(f"  found: {_format_effects(row['effects']) or 'none'}"
+              + "".join(f" ({n} in world axes: ({w[0]:.4g}, {w[1]:.4g}) N)" for n, w in world.items()))
         print(f"  each candidate refitted alone: {_format_effects(row['candidates'])}")
         print("  inclusion: " + ", ".join(f"{k} {v:.2f}" for k, v in row["inclusion"].items())
               + "; held-out mean squared error per candidate set [mm^2]: "
