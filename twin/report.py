@@ -61,8 +61,9 @@ def _loss_plot(loss_history) -> str:
     return _figure_png(fig)
 
 
-def _diagnosis_plots(traces: dict) -> str:
-    """Wrench residual (noise units) and position error over time, before and after the chosen effects."""
+def diagnosis_plots(traces: dict) -> str:
+    """Residual (noise units) and position error over time, before and after the chosen effects; a PNG,
+    base64-encoded."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -111,7 +112,7 @@ def diagnosis_section(asset: dict, traces: dict | None) -> str:
     inclusion = ", ".join(f"{html.escape(k)} {v:.2f}" for k, v in d["screening"]["inclusion"].items())
     fits = "".join(f"<tr><td>{k}</td><td>{v['rmse_position_m'] * 1000:.3f}</td><td>{v['rmse_rotation_rad']:.5f}</td>"
                    "</tr>" for k, v in d["fits"].items())
-    plot = f'<img src="data:image/png;base64,{_diagnosis_plots(traces)}">' if traces else ""
+    plot = f'<img src="data:image/png;base64,{diagnosis_plots(traces)}">' if traces else ""
     return f"""<h2>Diagnosis ({html.escape(d['evaluation'])})</h2>
 <table><tr><th>effect</th><th>params (SI)</th><th>inclusion probability</th><th>belongs to</th></tr>{effects}</table>
 <p>Screening inclusion probabilities: {inclusion}</p>

@@ -16,6 +16,7 @@ Stribeck excess f_s - f_c = 5 ratio sigma (it acts only near reversals), v_s
 
 from __future__ import annotations
 
+import base64
 import tempfile
 import time
 from dataclasses import dataclass, replace
@@ -360,6 +361,7 @@ def bench_diagnose_push_real(blocks: tuple[str, ...] = (), seed: int = 0) -> lis
     from pipelines.diagnose import DiagnoseConfig, diagnose_pushed
     from pipelines.identify.sliding import SlidingConfig, estimate_force_bias, push_windows
     from twin.bench.push import BLOCKS, DATA, FREE, block_prior, read_block_trial
+    from twin.report import diagnosis_plots
 
     known = tuple(b.folder for b in BLOCKS)
     unknown = sorted(set(blocks) - set(known))
@@ -370,6 +372,7 @@ def bench_diagnose_push_real(blocks: tuple[str, ...] = (), seed: int = 0) -> lis
         raise FileNotFoundError(f"{bags}: the MIT pushing bags are not there")
     sconfig = SlidingConfig()
     rows = []
+    Path("docs").mkdir(exist_ok=True)
     for block in (b for b in BLOCKS if b.folder in (blocks or known)):
         body, mu_prior = block_prior(block)
         usable, skipped = [], []
@@ -398,6 +401,8 @@ def bench_diagnose_push_real(blocks: tuple[str, ...] = (), seed: int = 0) -> lis
                "findings": list(diagnosis.findings), "unexplained": [u["summary"] for u in diagnosis.unexplained],
                "seconds": time.perf_counter() - t0}
         rows.append(row)
+        figure = Path(f"docs/diagnose_push_{block.folder}.png")
+        figure.write_bytes(base64.b64decode(diagnosis_plots(diagnosis.traces)))
         print(f"{block.folder}: fitted {', '.join(row['fitted'])}; held out {', '.join(row['held_out'])}"
               + (f"; skipped (no sliding window) {', '.join(skipped)}" if skipped else ""), flush=True)
         world = {n: e["force_world_n"] for n, e in row["evidence"].items() if "force_world_n" in e}
@@ -414,6 +419,7 @@ def bench_diagnose_push_real(blocks: tuple[str, ...] = (), seed: int = 0) -> lis
             print(f"  residual: {line}")
         for line in row["unexplained"]:
             print(f"  unexplained: {line}")
+        print(f"  figure: {figure}")
     return rows
 
 
