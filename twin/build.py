@@ -47,7 +47,7 @@ class BuildConfig:
     kind: Literal["free", "sliding", "prismatic", "revolute"] | None = None
     base_mesh: Path | None = None
     diagnose: bool = True
-    """Free bodies, drawers and doors: look for missing physics after identification (pipelines/diagnose)."""
+    """Look for missing physics after identification (pipelines/diagnose): free, pushed and jointed bodies."""
     topics: tuple[tuple[str, str], ...] = ()
     """(role, topic) overrides for reading the recordings."""
     frames: tuple[tuple[str, str], ...] = ()

@@ -70,7 +70,9 @@ def diagnosis_plots(traces: dict) -> str:
     import matplotlib.pyplot as plt
 
     t = np.asarray(traces["residual_t_s"])
-    order = np.argsort(t, kind="stable")  # several evaluation recordings interleave in time
+    order = np.argsort(t, kind="stable")
+    # several evaluation recordings, each on its own clock, interleave in time: points, not a line between them
+    style = {"lw": 0.8} if np.all(np.diff(t) >= 0) else {"ls": "none", "marker": ".", "ms": 2}
     # a wrench residual has force and torque channels, a pushed object's replay position and heading errors,
     # a joint's one effort channel
     parts = {6: ((slice(0, 3), "force"), (slice(3, 6), "torque")),
@@ -80,7 +82,7 @@ def diagnosis_plots(traces: dict) -> str:
     for ax, (part, label) in zip(axes, parts):
         for key, color in (("residual_before", "tab:red"), ("residual_after", "tab:blue")):
             r = np.linalg.norm(np.asarray(traces[key])[:, part], axis=1)
-            ax.plot(t[order], r[order], lw=0.8, color=color, label=key.split("_")[1])
+            ax.plot(t[order], r[order], color=color, label=key.split("_")[1], **style)
         ax.set_ylabel(f"|{label} residual| [noise]")
     axes[0].legend(loc="upper right")
     axes[0].set_title("What the model leaves unexplained, before and after the chosen effects")

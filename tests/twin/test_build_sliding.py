@@ -43,6 +43,15 @@ def test_build_sliding_measures_friction_and_marks_the_mass_prior(tmp_path):
     assert asset["fit"]["final"]["rmse_position_m"] < asset["fit"]["baseline"]["rmse_position_m"]
     assert all(check["ok"] for check in asset["provenance"]["validation"]["checks"])
     assert asset["provenance"]["identify"]["kind"] == "sliding"
+    # the diagnosis ran (each half of the push fitted on the other) and, the push being clean, found nothing
+    assert asset["effects"] == [] and asset["provenance"]["diagnose"]["evaluation"] == "time-blocked cross-validation"
+
+    # `twin diagnose` on the built asset reads the recording with the build's options and rewrites asset.json
+    proc = twin("diagnose", str(out), "--logs", str(tmp_path / "push.mcap"), "--bootstraps", "5")
+    assert proc.returncode == 0, proc.stderr
+    rediagnosed = json.loads((out / "asset.json").read_text())
+    assert rediagnosed["provenance"]["diagnose"]["run"]["logs"] == [str(tmp_path / "push.mcap")]
+    assert rediagnosed["theta"] == asset["theta"]
 
 
 def test_malformed_topic_option_is_one_error_line(tmp_path):
