@@ -152,7 +152,7 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     final = fit(best, tuple((i, np.ones(p.window_count, bool)) for i, p in enumerate(parts[:len(trials)]))) \
         if best else None
     effects = []
-    for name in best:
+    for name in sorted(best, key=lambda c: evaluate((c,)).sum()):  # most certain first
         params, evidence = _effect_params(name, final, trials[0])
         effects.append(Effect(name, params, {
             **evidence, "inclusion_probability": inclusion[name],
