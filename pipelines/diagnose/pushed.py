@@ -26,7 +26,6 @@ predicts better.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from itertools import combinations
 from pathlib import Path
 
 import numpy as np
@@ -139,8 +138,6 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
         pair = tuple(c for c in PUSHED_CANDIDATES if c in passing[:2])
         if predicts_better(evaluate(pair), evaluate(best)):
             best = pair
-    for names in combinations(passing[:2], 2):
-        evaluate(tuple(c for c in PUSHED_CANDIDATES if c in names))
     scores = {"+".join(k) or "none": float(evaluate(k).mean()) for k in refits}
 
     # inclusion: the share of bootstrap resamples of the evaluation windows a candidate predicts better in
@@ -165,6 +162,7 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     for e in effects:
         e.evidence.update({"heldout_rmse_position_before_m": fits["before"].rmse_position_m,
                            "heldout_rmse_position_after_m": fits["after"].rmse_position_m})
+    # the evaluation recordings share one tracker: the last one's noise sets the unit
     noise = estimate_noise_levels(recordings[-1].pose.t_s, recordings[-1].pose.position,
                                   recordings[-1].pose.quat_xyzw, recordings[-1].wrench.t_s,
                                   recordings[-1].wrench.force, recordings[-1].wrench.torque).position_m
