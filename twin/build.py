@@ -281,15 +281,13 @@ def _sliding_result(pushed, refit, diagnosis, body, prior):
                          source="measured" if izz_known else "prior"),
         friction=Estimate(float(mu), float(mu_std), interval95=(float(mu - 1.96 * mu_std), float(mu + 1.96 * mu_std))),
     )
-    metrics = {k: FitMetrics(*v) for k, v in (("baseline", pushed.baseline), ("final", pushed.final))}
-    if refit is not None:
-        metrics = {"baseline": diagnosis.fits["before"], "final": diagnosis.fits["after"]}
-    provenance = {"identify": pushed.provenance() | {"body": asdict(body)},
+    # the replay before and after: the diagnosis's held-out windows when it chose effects, else the identification's
+    baseline, final = ((diagnosis.fits["before"], diagnosis.fits["after"]) if refit is not None
+                       else (FitMetrics(*pushed.baseline), FitMetrics(*pushed.final)))
+    provenance = {"identify": pushed.provenance() | {"body": asdict(body)}
+                  | ({"with_effects": refit.provenance()} if refit is not None else {}),
                   **({"diagnose": diagnosis.provenance()} if diagnosis else {})}
-    if refit is not None:
-        provenance["identify"]["with_effects"] = refit.provenance()
-    return (theta, Fit(metrics["baseline"], metrics["final"], pushed.config.window_s), provenance,
-            fit.loss_history, pushed.traces)
+    return theta, Fit(baseline, final, pushed.config.window_s), provenance, fit.loss_history, pushed.traces
 
 
 def _log_diagnosis(diagnosis, log) -> None:

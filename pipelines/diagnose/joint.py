@@ -32,7 +32,7 @@ from pipelines.identify.jointed import (
     joint_effect_columns, q_and_position_rmse, replay_jointed,
 )
 
-from .residuals import analyse_joint_residual, describe
+from .residuals import analyse_joint_residual, describe, unexplained
 from .screening import Library, fit_subset, screen
 from .select import DiagnoseConfig, Diagnosis, predicts_better
 
@@ -220,12 +220,7 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
                                                eval_rows["tau"], r, stride=stride, unit=unit)
     r_before, r_after = residual(()), residual(best)
     residuals = {"before": analyse(r_before), "after": analyse(r_after)}
-    after = residuals["after"]
-    unexplained = tuple(
-        {"summary": s["summary"], "where": s["where"], "share": s["share"]}
-        for s in after.localisation
-        if s["share"] >= config.unexplained_share and min(after.whiteness_p) < 1e-6
-    )
+    left = unexplained(residuals["after"], config.unexplained_share)
     traces = {"t_s": windows.t_s.reshape(-1).tolist(),
               "measured_position": joint.tracked_position(windows.q[1:]).reshape(-1, 3).tolist(),
               "before_position": joint.tracked_position(q_before).reshape(-1, 3).tolist(),
@@ -233,7 +228,7 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
               "window_s": jconfig.window_s, "residual_t_s": eval_rows["t_s"].tolist(),
               "residual_before": r_before[:, None].tolist(), "residual_after": r_after[:, None].tolist()}
     diagnosis = Diagnosis(
-        effects=tuple(effects), unexplained=unexplained, screening=screening, scores=scores,
+        effects=tuple(effects), unexplained=left, screening=screening, scores=scores,
         fits=fits,
         residuals=residuals, findings=tuple(describe(residuals["before"])),
         inertial={"before": base_fit.inertial, "after": final.inertial},

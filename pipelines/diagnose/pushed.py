@@ -37,7 +37,7 @@ from pipelines.identify.sliding import (
     estimate_force_bias, identify_sliding, push_windows,
 )
 
-from .residuals import analyse_planar_residual, describe
+from .residuals import analyse_planar_residual, describe, unexplained
 from .screening import Screening
 from .select import DiagnoseConfig, Diagnosis, predicts_better
 
@@ -67,8 +67,8 @@ class _Refit:
 
 def _select(parts: list[PushWindows], picks) -> PushWindows:
     def take(w: PushWindows, mask: np.ndarray) -> PushWindows:
-        return PushWindows(w.dt_s, w.substeps, w.t_start_s[mask], w.start[mask], w.force[:, mask],
-                           w.contact[:, mask], w.measured[:, mask], w.force_margin)
+        return replace(w, t_start_s=w.t_start_s[mask], start=w.start[mask], force=w.force[:, mask],
+                       contact=w.contact[:, mask], measured=w.measured[:, mask])
 
     return concat_push_windows([take(parts[i], mask) for i, mask in picks if mask.any()])
 
@@ -172,7 +172,9 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
                                             window_samples=before[0].test.sample_count,
                                             recordings=names[s["recording"]])
                  for k, s in series.items()}
-    unexplained = _unexplained(residuals["after"], series["after"]["t_s"], series["after"]["residual"], config)
+    t_after = series["after"]["t_s"]
+    left = unexplained(residuals["after"], config.unexplained_share, (t_after.min(), t_after.max()),
+                       series["after"]["residual"])
     traces = {"t_s": series["before"]["t_s"].tolist(),
               "measured_position": series["before"]["measured"].tolist(),
               "before_position": (series["before"]["measured"] + series["before"]["position_error"]).tolist(),
@@ -185,29 +187,11 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
                           {n: _effect_params(n, refits[(n,)][0].fit, trials[0])[0] for n in PUSHED_CANDIDATES},
                           config.bootstraps)
     diagnosis = Diagnosis(
-        effects=tuple(effects), unexplained=unexplained, screening=screening, scores=scores, fits=fits,
+        effects=tuple(effects), unexplained=left, screening=screening, scores=scores, fits=fits,
         residuals=residuals, findings=tuple(describe(residuals["before"])), inertial={},
         heldout=bool(holdouts), traces=traces,
     )
     return diagnosis, final
-
-
-def _unexplained(analysis, t_s: np.ndarray, residual: np.ndarray, config: DiagnoseConfig) -> tuple[dict, ...]:
-    """What the chosen model leaves: stretches holding config.unexplained_share of a non-white residual, or,
-    where the windows' errors are not white but no stretch stands out (a mismatch spread over every push),
-    the channel itself, over the evaluation recordings' span (t_s: each recording's own time)."""
-    if min(analysis.whiteness_p) >= 1e-6:
-        return ()
-    stretches = tuple({"summary": s["summary"], "where": s["where"], "share": s["share"]}
-                      for s in analysis.localisation if s["share"] >= config.unexplained_share)
-    if stretches:
-        return stretches
-    energy = np.sum(residual**2, axis=0)
-    return tuple(
-        {"summary": f"{ch} replay error not white over the windows (Ljung-Box p = {p:.1e}), RMS {rms:.0f}x the "
-                    "tracker's noise, spread over every evaluation recording",
-         "where": {"t_s": [float(t_s.min()), float(t_s.max())]}, "share": float(energy[j] / energy.sum())}
-        for j, (ch, p, rms) in enumerate(zip(analysis.channels, analysis.whiteness_p, analysis.rms)) if p < 1e-6)
 
 
 def _effect_params(name: str, fit: SlidingFit, recording) -> tuple[dict, dict]:

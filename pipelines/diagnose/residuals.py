@@ -199,6 +199,29 @@ def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndar
     return sorted(out, key=lambda d: -d["share"])
 
 
+def unexplained(analysis: ResidualAnalysis, min_share: float, span_s: tuple[float, float] | None = None,
+                residual: np.ndarray | None = None, p_value: float = 1e-6) -> tuple[dict, ...]:
+    """DESIGN.md `unexplained` entries for what a chosen model leaves: when some channel is not white (Ljung-Box
+    p below `p_value`), the stretches holding at least `min_share` of the residual.
+
+    With `span_s` (the evaluation's time span [s]) and `residual` [N, channels], a non-white residual in which no
+    stretch stands out (a mismatch spread over everything) is reported per non-white channel over that span,
+    with the channel's share of the residual.
+    """
+    if min(analysis.whiteness_p) >= p_value:
+        return ()
+    stretches = tuple({"summary": s["summary"], "where": s["where"], "share": s["share"]}
+                      for s in analysis.localisation if s["share"] >= min_share)
+    if stretches or span_s is None or residual is None:
+        return stretches
+    energy = np.sum(residual**2, axis=0)
+    return tuple(
+        {"summary": f"{ch} residual not white (Ljung-Box p = {p:.1e}), RMS {rms:.0f}x noise, spread over the "
+                    "whole evaluation",
+         "where": {"t_s": [float(span_s[0]), float(span_s[1])]}, "share": float(energy[j] / energy.sum())}
+        for j, (ch, p, rms) in enumerate(zip(analysis.channels, analysis.whiteness_p, analysis.rms)) if p < p_value)
+
+
 def describe(analysis: ResidualAnalysis, threshold: float = 0.3) -> list[str]:
     """The analysis in words: non-white channels, delay-like lags, strong state correlations."""
     lines = []

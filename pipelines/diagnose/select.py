@@ -32,7 +32,7 @@ from pipelines.identify.rollout import FreeBodyRollout
 from pipelines.identify.windows import concat_windows, make_windows
 
 from .effects import CANDIDATES, NONUNIFORM_DENSITY, effect_vector
-from .residuals import ResidualAnalysis, analyse_residuals, describe
+from .residuals import ResidualAnalysis, analyse_residuals, describe, unexplained
 from .screening import Library, Screening, bic, build_library, fit_subset, screen
 
 
@@ -366,19 +366,14 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
                                     stride=stride),
         "after": analyse_residuals(eval_rows_after, _residual(eval_rows_after, model, com_tracked), stride=stride),
     }
-    after = residuals["after"]
-    unexplained = tuple(
-        {"summary": s["summary"], "where": s["where"], "share": s["share"]}
-        for s in after.localisation
-        if s["share"] >= config.unexplained_share and min(after.whiteness_p) < 1e-6
-    )
+    left = unexplained(residuals["after"], config.unexplained_share)
     traces = {"t_s": trace_before["t_s"], "measured_position": trace_before["measured_position"],
               "before_position": trace_before["position"], "after_position": trace_after["position"],
               "window_s": trace_before["window_s"], "residual_t_s": eval_rows_after.t_s.tolist(),
               "residual_before": _residual(eval_rows_before, baseline, com_tracked).tolist(),
               "residual_after": _residual(eval_rows_after, model, com_tracked).tolist()}
     return Diagnosis(
-        effects=tuple(effects), unexplained=unexplained, screening=screening, scores=scores,
+        effects=tuple(effects), unexplained=left, screening=screening, scores=scores,
         fits={"before": fit_before, "after": fit_after}, residuals=residuals,
         findings=tuple(describe(residuals["before"])), inertial={"before": before_inertial, "after": after_inertial},
         heldout=holdout is not None, traces=traces,

@@ -52,3 +52,27 @@ def test_clean_push_reports_nothing(tmp_path):
     diagnosis, refit = diagnose_pushed([trial], [held], _body(), 0.5, SlidingConfig(), DiagnoseConfig(bootstraps=20))
     assert diagnosis.effects == () and refit is None
     assert diagnosis.fits["after"] == diagnosis.fits["before"]
+
+
+def test_stretches_end_with_their_recording_and_a_spread_mismatch_is_unexplained():
+    """Two evaluation recordings on their own clocks: a stretch across their junction is split and named; a
+    non-white residual with no stretch standing out is reported per channel over the evaluation's span."""
+    from pipelines.diagnose.residuals import ResidualAnalysis, _localise, unexplained
+
+    t = np.r_[np.arange(10.0), np.arange(10.0)]
+    energy = np.ones(20)
+    energy[7:13] = 100.0
+    names = np.array(["a.mcap"] * 10 + ["b.mcap"] * 10)
+    stretches = _localise(t, energy, energy, np.ones(20), 4.0, recordings=names)
+    assert [(s["where"]["recording"], s["where"]["t_s"]) for s in stretches] == [("a.mcap", [7.0, 9.0]),
+                                                                                  ("b.mcap", [0.0, 2.0])]
+    spread = ResidualAnalysis(rms=[3.0, 1.0, 1.0], whiteness_p=[1e-9, 0.5, 0.5], xcorr_peak_lag_s=[0.0] * 3,
+                              xcorr_peak=[0.0] * 3, correlation={}, localisation=[],
+                              channels=("x", "y", "heading"))
+    residual = np.c_[np.full(20, 3.0), np.ones(20), np.ones(20)]
+    (entry,) = unexplained(spread, 0.2, (0.0, 9.0), residual)
+    assert entry["where"] == {"t_s": [0.0, 9.0]} and entry["share"] == pytest.approx(9 / 11)
+    assert entry["summary"].startswith("x residual not white")
+    assert unexplained(spread, 0.2) == ()  # without a span only stretches are reported
+    white = ResidualAnalysis(**{**spread.__dict__, "whiteness_p": [0.5] * 3})
+    assert unexplained(white, 0.2, (0.0, 9.0), residual) == ()
