@@ -131,7 +131,7 @@ class Bench:
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
     seeds: int = 5
-    """Noise draws per object (paper, mujoco)."""
+    """Noise draws per object (paper, mujoco); seeds per case (diagnose --push-synth)."""
     blocks: tuple[str, ...] = ()
     """push-real, diagnose --push-real: block folders to run (St_block, Al_block, Plastic_block; default all)."""
     offsets_only: bool = False
@@ -167,6 +167,8 @@ class Bench:
     push_real: bool = False
     """Diagnose the MIT block pushes of ../shared/data (odd trials fitted, even held out; --blocks picks)
     instead of synthetic recordings (diagnose)."""
+    push_synth: bool = False
+    """Diagnose synthetic pushes with a concealed drag, a concealed delay or nothing, --seeds of each (diagnose)."""
 
 
 def _log(message: str) -> None:
@@ -283,12 +285,16 @@ def main(argv: list[str] | None = None) -> int:
 
                 bench_sample(command.sample, command.methods)
             elif command.what == "diagnose":
-                from twin.bench.diagnose import bench_diagnose, bench_diagnose_push_real, bench_diagnose_workshop
+                from twin.bench.diagnose import (
+                    bench_diagnose, bench_diagnose_push_real, bench_diagnose_push_synth, bench_diagnose_workshop,
+                )
 
                 if command.workshop:
                     bench_diagnose_workshop()
                 elif command.push_real:
                     bench_diagnose_push_real(command.blocks)
+                elif command.push_synth:
+                    bench_diagnose_push_synth(command.seeds)
                 else:
                     bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases)
             elif command.what == "crlb":

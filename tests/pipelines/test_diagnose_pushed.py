@@ -10,13 +10,14 @@ from pipelines.diagnose import DiagnoseConfig, diagnose_pushed
 from pipelines.identify.sliding import PlanarBody, SlidingConfig
 from pipelines.logs import read_recording
 from pipelines.synth.push import PushConfig, write_push
+from twin.bench.push import box_izz
 
 HALF = (0.05, 0.05, 0.005)
 MASS = 0.75
 
 
 def _body() -> PlanarBody:
-    return PlanarBody(HALF, MASS, MASS * ((2 * HALF[0]) ** 2 + (2 * HALF[1]) ** 2) / 12)
+    return PlanarBody(HALF, MASS, box_izz(MASS, HALF))
 
 
 def _pushes(tmp_path, **concealed):

@@ -423,6 +423,67 @@ def bench_diagnose_push_real(blocks: tuple[str, ...] = (), seed: int = 0) -> lis
     return rows
 
 
+
+PUSH_SYNTH_EFFECTS = ("viscous_damping", "time_delay", None)
+"""Concealed in the synthetic pushes, in turn (None: clean)."""
+
+
+def bench_diagnose_push_synth(seeds: int = 3) -> list[dict]:
+    """Synthetic pushes (pipelines/synth/push.py: a 10 x 10 x 1 cm, 0.75 kg block, mu 0.3, pushed off its centre
+    line so it turns) with a concealed drag, a concealed delay or nothing, one trial and one held-out push per
+    case, the tool told nothing; prints what it finds against the truth."""
+    from pipelines.diagnose import DiagnoseConfig, diagnose_pushed
+    from pipelines.identify.sliding import PlanarBody, SlidingConfig
+    from pipelines.logs import read_recording
+    from pipelines.synth.push import PushConfig, write_push
+    from twin.bench.push import box_izz
+
+    half, mass = (0.05, 0.05, 0.005), 0.75
+    body = PlanarBody(half, mass, box_izz(mass, half))
+    rows = []
+    header = (f"{'seed':>4} {'concealed':<16} {'truth':>10} {'found (top-1)':<16} {'value':>10} {'err %':>7} "
+              f"{'rmse before mm':>14} {'after mm':>9} {'s':>5}")
+    print(header)
+    print("-" * len(header))
+    for seed in range(seeds):
+        rng = np.random.default_rng(seed)
+        for name in PUSH_SYNTH_EFFECTS:
+            concealed, key, truth = {}, None, None
+            if name == "viscous_damping":
+                truth = float(rng.uniform(1.0, 5.0))
+                concealed, key = {"damping_n_s_m": truth}, "b"
+            elif name == "time_delay":
+                truth = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.005, 0.03))
+                concealed, key = {"delay_s": truth}, "seconds"
+            t0 = time.perf_counter()
+            with tempfile.TemporaryDirectory() as tmp:
+                recordings = []
+                for k in range(2):  # the trial and the held-out push
+                    path = Path(tmp) / f"push_{k}.mcap"
+                    write_push(path, PushConfig(half_extents_m=half, mass_kg=mass, mu=0.3,
+                                                offset_m=float(rng.uniform(0.01, 0.02)), seed=seed * 2 + k,
+                                                **concealed))
+                    recordings.append(read_recording(path))
+            diagnosis, _ = diagnose_pushed(recordings[:1], recordings[1:], body, 0.5, SlidingConfig(),
+                                           DiagnoseConfig(seed=seed))
+            top = diagnosis.effects[0] if diagnosis.effects else None
+            value = top.params[key] if top is not None and top.name == name else None
+            error = None if value is None else 100 * (value - truth) / abs(truth)
+            row = {"seed": seed, "concealed": name, "truth": truth, "found": top.name if top else None,
+                   "all_found": [e.name for e in diagnosis.effects], "value": value, "error_pct": error,
+                   "rmse_before_m": diagnosis.fits["before"].rmse_position_m,
+                   "rmse_after_m": diagnosis.fits["after"].rmse_position_m, "seconds": time.perf_counter() - t0}
+            rows.append(row)
+            print(f"{seed:>4} {name or 'none':<16} {'' if truth is None else f'{truth:.4g}':>10} "
+                  f"{row['found'] or 'none':<16} {'' if value is None else f'{value:.4g}':>10} "
+                  f"{'' if error is None else f'{error:+.1f}':>7} {1000 * row['rmse_before_m']:>14.3f} "
+                  f"{1000 * row['rmse_after_m']:>9.3f} {row['seconds']:>5.1f}", flush=True)
+    concealed = [r for r in rows if r["concealed"]]
+    clean = [r for r in rows if not r["concealed"]]
+    print(f"top-1 right: {sum(r['found'] == r['concealed'] for r in concealed)}/{len(concealed)} concealed; "
+          f"nothing reported on clean: {sum(not r['all_found'] for r in clean)}/{len(clean)}")
+    return rows
+
 def _format_effects(effects: dict) -> str:
     def fmt(v):
         if isinstance(v, (list, tuple)):

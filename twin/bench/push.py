@@ -27,7 +27,7 @@ import numpy as np
 DATA = (Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "mit-push").resolve()
 
 
-def _box_izz(mass_kg: float, half_extents_m) -> float:
+def box_izz(mass_kg: float, half_extents_m) -> float:
     hx, hy, _ = half_extents_m
     return mass_kg * ((2 * hx) ** 2 + (2 * hy) ** 2) / 12.0
 
@@ -61,7 +61,7 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
             for mode, mass, free in (("m known", truth.mass_kg, (True, False, True)),
                                      ("m free", truth.mass_kg * prior_mass_factor, (True, True, True))):
                 t0 = time.perf_counter()
-                body = PlanarBody(push.half_extents_m, mass, _box_izz(mass, push.half_extents_m))
+                body = PlanarBody(push.half_extents_m, mass, box_izz(mass, push.half_extents_m))
                 bias = estimate_force_bias(rec, config)
                 windows = push_windows(rec, body, config, bias)
                 fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=free)
@@ -148,7 +148,7 @@ def block_prior(block: Block):
     material = material_range(block.material)
     hx, hy, hz = block.half_extents_m
     mass = material.density * 8 * hx * hy * hz
-    return PlanarBody(block.half_extents_m, mass, _box_izz(mass, block.half_extents_m)), material.kinetic()[0]
+    return PlanarBody(block.half_extents_m, mass, box_izz(mass, block.half_extents_m)), material.kinetic()[0]
 
 
 FREE = (True, False, True)
