@@ -89,7 +89,15 @@ class StageTimer:
 def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     """Run every stage and write config.output atomically; returns the output directory."""
     from assets import (
-        Asset, Estimate, Fit, Geometry, Material, Pose, Theta, asset_to_json, write_asset,
+        Asset,
+        Estimate,
+        Fit,
+        Geometry,
+        Material,
+        Pose,
+        Theta,
+        asset_to_json,
+        write_asset,
     )
     from assets.materials import material_range
     from exporters import export_all
@@ -160,6 +168,8 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             _log_diagnosis(diagnosis, log)
         theta, fit, identify_provenance, loss_history, traces = _sliding_result(pushed, refit, diagnosis, body,
                                                                                  prior)
+        log(f"  friction {theta.friction.value:.3f} +- {theta.friction.std:.3f} "
+            f"({identify_provenance['identify']['friction_from']})")
     else:
         X_tracked_body = tracked_to_object(trials[0], placement)
         id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations,
@@ -268,7 +278,8 @@ def _sliding_result(pushed, refit, diagnosis, body, prior):
     fit = refit if refit is not None else pushed.fit
     inertia0 = np.asarray(prior.inertial.inertia, dtype=float)
     mass0 = float(prior.inertial.mass)
-    (mu, mass, izz), (mu_std, mass_std, izz_std) = fit.theta, fit.std
+    (_, mass, izz), (_, mass_std, izz_std) = fit.theta, fit.std
+    friction, friction_from = _sliding_friction(fit, pushed.balance, prior)
     _, mass_known, izz_known = fit.determined
     # one tensor scale keeps it physically consistent: Izz's if the pushes determined it, else the mass's
     scale = izz / inertia0[2, 2] if izz_known else (mass / mass0 if mass_known else 1.0)
@@ -279,15 +290,33 @@ def _sliding_result(pushed, refit, diagnosis, body, prior):
         com=Estimate(tuple(prior.inertial.com), (0.0, 0.0, 0.0), source="prior"),
         inertia=Estimate(tuple(map(tuple, inertia)), tuple(map(tuple, np.abs(inertia) * (izz_std / izz))),
                          source="measured" if izz_known else "prior"),
-        friction=Estimate(float(mu), float(mu_std), interval95=(float(mu - 1.96 * mu_std), float(mu + 1.96 * mu_std))),
+        friction=friction,
     )
     # the replay before and after: the diagnosis's held-out windows when it chose effects, else the identification's
     baseline, final = ((diagnosis.fits["before"], diagnosis.fits["after"]) if refit is not None
                        else (FitMetrics(*pushed.baseline), FitMetrics(*pushed.final)))
-    provenance = {"identify": pushed.provenance() | {"body": asdict(body)}
+    provenance = {"identify": pushed.provenance() | {"body": asdict(body), "friction_from": friction_from}
                   | ({"with_effects": refit.provenance()} if refit is not None else {}),
                   **({"diagnose": diagnosis.provenance()} if diagnosis else {})}
     return theta, Fit(baseline, final, pushed.config.window_s), provenance, fit.loss_history, pushed.traces
+
+
+def _sliding_friction(fit, balance, prior):
+    """The friction coefficient and what gave it: the sliding fit; where its simulation stuck in every window
+    (a slow push: mu only bounded from below), the quasi-static wrench balance; without one, the prior raised
+    to the bound, marked "prior" with the bound as its interval's low end."""
+    from assets import Estimate
+
+    mu, mu_std = float(fit.theta[0]), float(fit.std[0])
+    if fit.determined[0]:
+        return Estimate(mu, mu_std, interval95=(mu - 1.96 * mu_std, mu + 1.96 * mu_std)), "sliding fit"
+    if balance is not None:
+        return (Estimate(balance.mu, balance.std, interval95=(balance.mu - 1.96 * balance.std,
+                                                               balance.mu + 1.96 * balance.std)), "wrench balance")
+    central, _, high = map(float, prior.friction_kinetic)
+    value = max(central, mu)
+    return (Estimate(value, (max(high, value) - mu) / 4, source="prior", interval95=(mu, max(high, value))),
+            "prior, above the sliding fit's bound")
 
 
 def _log_diagnosis(diagnosis, log) -> None:

@@ -25,6 +25,7 @@ curvature from the data is below the prior's is reported as taken from the prior
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 import warp as wp
@@ -46,7 +47,11 @@ __all__ = [
     "identify_sliding",
     "replay_errors",
     "push_windows",
+    "sliding_windows",
     "quasi_static_friction",
+    "steady_windows",
+    "wrench_balance_friction",
+    "WrenchBalance",
 ]
 
 GRAVITY_M_S2 = 9.81
@@ -628,7 +633,8 @@ class SlidingFit:
     curvature at the optimum, start velocities profiled out (residuals treated as
     independent, so optimistic); determined: per parameter, whether the data at
     least halve the prior's variance (else the value is essentially the prior's
-    and is marked "prior").
+    and is marked "prior"); mu is not determined when the simulation sticks in every window in which
+    the object moved.
     effect [EFFECT_SIZE], effect_std: the fitted effect vector (zeros where no effect was
     fitted; see apply_sliding_effects) and the standard deviations of its fitted slots.
     rmse_position_m, rmse_heading_rad: windowed replay at theta over the fitted
@@ -648,6 +654,9 @@ class SlidingFit:
     """Fitted start-velocity corrections per window [W, 3]: vx, vy [m/s], yaw rate [rad/s]."""
     effect: np.ndarray = field(default_factory=lambda: np.zeros(EFFECT_SIZE))
     effect_std: np.ndarray = field(default_factory=lambda: np.zeros(EFFECT_SIZE))
+    sliding_windows: int = 0
+    """Windows in which the simulation at theta slides where the measured object moves (`sliding_windows`);
+    with none while the object moved, mu is a lower bound and not determined."""
 
     def provenance(self) -> dict:
         names = ("friction", "mass", "izz")
@@ -656,10 +665,34 @@ class SlidingFit:
             "std": dict(zip(names, map(float, self.std))),
             "determined_by_data": dict(zip(names, self.determined)),
             "windows": self.window_count,
+            "sliding_windows": self.sliding_windows,
             "evaluations": self.evaluations,
             "rmse_position_m": self.rmse_position_m,
             "rmse_heading_rad": self.rmse_heading_rad,
         }
+
+
+def sliding_windows(rollout: SlidingRollout, theta, correction=None, effect=None) -> tuple[np.ndarray, np.ndarray]:
+    """Per window: whether the measured object still moves over the window's second half (at least
+    config.moving_speed_m_s on average), and whether the simulation at theta then slides too (at least half
+    the measured travel; x, y and the heading as an arc at the face's half diagonal).
+
+    A force-driven Coulomb model of a slow push balances on a knife edge: below the force over m g the
+    object accelerates, above it it sticks, after coasting off its start velocity. Where the real object kept
+    moving, a fit that sticks in every window has found the smallest mu that holds it, a lower bound, and
+    its curvature is that of sliding below the bound, not a measurement of mu.
+    """
+    simulated = rollout.trajectories(theta, correction, effect)
+    measured = rollout.windows.measured
+    half = measured.shape[0] // 2
+    span_s = (measured.shape[0] - 1 - half) * rollout.windows.dt_s * rollout.windows.substeps
+
+    def travel(track):
+        step = track[-1] - track[half]
+        return np.hypot(np.hypot(step[:, 0], step[:, 1]), step[:, 2] * rollout.yaw_length_m)
+
+    moving = travel(measured) >= rollout.config.moving_speed_m_s * span_s
+    return moving, moving & (travel(simulated) >= 0.5 * travel(measured))
 
 
 def replay_errors(rollout: SlidingRollout, theta, correction=None, effect=None) -> tuple[float, float]:
@@ -744,14 +777,30 @@ def identify_sliding(
     bounds = (list(zip(lo[free_idx], hi[free_idx]))
               + [(a / sc, b / sc) for a, b, sc in ((*_effect_bounds(config)[j], _EFFECT_SCALE[j]) for j in slots)]
               + [(-20.0, 20.0)] * (3 * W))
-    sigma2 = (1e-3) ** 2
-    for _ in range(2):
-        x = minimize(objective, x, args=(sigma2,), jac=True, method="L-BFGS-B", bounds=bounds,
-                     options={"maxiter": config.max_iterations, "ftol": 1e-10, "gtol": 1e-8}).x
-        u, e, c = split(x)
-        sigma2 = max(float(np.sum(rollout.residuals(np.exp(u), c, e) ** 2)) / n_res, 1e-12)
+    def fit(x):
+        sigma2 = (1e-3) ** 2
+        for _ in range(2):
+            x = minimize(objective, x, args=(sigma2,), jac=True, method="L-BFGS-B", bounds=bounds,
+                         options={"maxiter": config.max_iterations, "ftol": 1e-10, "gtol": 1e-8}).x
+            u, e, c = split(x)
+            sigma2 = max(float(np.sum(rollout.residuals(np.exp(u), c, e) ** 2)) / n_res, 1e-12)
+        return x, sigma2
+
+    x, sigma2 = fit(x)
     u, effect, correction = split(x)
     theta = np.exp(u)
+    moving, slides = sliding_windows(rollout, theta, correction, effect)
+    if free[0] and moving.any() and not slides.any():
+        # stuck: on that plateau the gradient in mu is zero (newton.md), so a sliding fit below it is found by
+        # a scan, and the fit restarted from the scan's best if that beats sticking
+        scan = np.geomspace(config.mu_bounds[0], theta[0], 13)[:-1]
+        losses = [float(np.sum(rollout.residuals(np.r_[mu, theta[1:]], correction, effect) ** 2)) for mu in scan]
+        if min(losses) < sigma2 * n_res:
+            x[0] = np.log(scan[int(np.argmin(losses))])
+            x, sigma2 = fit(x)
+            u, effect, correction = split(x)
+            theta = np.exp(u)
+            moving, slides = sliding_windows(rollout, theta, correction, effect)
 
     # curvature of the data term by central differences of the tape gradient. Each window's
     # corrections touch only its own residuals, so their block is diagonal per window and three
@@ -780,6 +829,11 @@ def identify_sliding(
     std_log = np.array(prior_std, dtype=float)
     # a parameter the loss is flat in (e.g. mu while every window sticks) has no curvature: unknown, not exact
     std_log[free_idx] = np.where(np.diag(H_post)[:k] > 1e-12, np.sqrt(var[:k]), np.inf)
+    # a simulated object that sticks in every window, where the real one moved, only bounds mu from below: the
+    # curvature there is the cost of sliding at a smaller mu, not a measurement of mu
+    sliding = int(np.sum(slides))
+    if moving.any() and sliding == 0:
+        std_log[0] = np.inf
     # determined: the data at least halve the prior's variance (mu has no prior: determined when it has curvature)
     determined = tuple(bool(free[i] and np.isfinite(std_log[i])
                             and (not np.isfinite(prior_std[i]) or std_log[i] ** 2 < 0.5 * prior_std[i] ** 2))
@@ -789,7 +843,7 @@ def identify_sliding(
     effect_std[slots] = np.sqrt(var[k:g]) * _EFFECT_SCALE[slots]
     rmse_p, rmse_h = replay_errors(rollout, theta, correction, effect)
     return SlidingFit(theta, std, determined, rmse_p, rmse_h, W, len(history), history, correction=correction,
-                      effect=effect, effect_std=effect_std)
+                      effect=effect, effect_std=effect_std, sliding_windows=sliding)
 
 
 def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bias: ForceBias,
@@ -808,13 +862,111 @@ def quasi_static_friction(recording, body: PlanarBody, config: SlidingConfig, bi
 
 
 @dataclass(frozen=True)
+class WrenchBalance:
+    """Result of `wrench_balance_friction`: mu and its standard deviation (least squares over the
+    windows' balances), mu per window, and the RMS of the balance left [N] (moments over the face's half
+    diagonal), the measure of how well Coulomb friction under uniform pressure explains the pushes."""
+
+    mu: float
+    std: float
+    per_window: np.ndarray
+    residual_n: float
+
+    def provenance(self) -> dict:
+        return {"mu": self.mu, "std": self.std, "per_window": self.per_window.tolist(), "residual_n": self.residual_n}
+
+
+def steady_windows(windows: PushWindows, body: PlanarBody, config: SlidingConfig) -> np.ndarray:
+    """Per window, whether the object slides throughout it: it travels at least config.moving_speed_m_s on
+    average, at least half a third of its travel over each third, and at its start and end at least half its
+    mean speed (travel: x, y and the heading as an arc at the face's half diagonal)."""
+    m = windows.measured
+    arc = float(np.hypot(*body.half_extents_m[:2]))
+    span_s = windows.sample_count * windows.dt_s * windows.substeps
+    cuts = np.linspace(0, m.shape[0] - 1, 4).round().astype(int)
+
+    def size(step):
+        return np.hypot(np.hypot(step[..., 0], step[..., 1]), step[..., 2] * arc)
+
+    whole = size(m[-1] - m[0])
+    thirds = np.all([size(m[b] - m[a]) >= whole / 6 for a, b in pairwise(cuts)], axis=0)
+    start, end = windows.start[:, 3:6], _end_twist(windows)
+    mean_speed = whole / span_s
+    return ((whole >= config.moving_speed_m_s * span_s) & thirds
+            & (size(start) >= 0.5 * mean_speed) & (size(end) >= 0.5 * mean_speed))
+
+
+def _end_twist(windows: PushWindows) -> np.ndarray:
+    """x, y rates [m/s] and yaw rate [rad/s] at each window's end: slope of a quadratic through its last samples."""
+    period = windows.dt_s * windows.substeps
+    n = min(windows.sample_count + 1, 7)
+    tail = np.arange(1 - n, 1) * period
+    m = windows.measured[-n:]
+    coef = np.polynomial.polynomial.polyfit(tail, m.reshape(n, -1), 2)[1]
+    return coef.reshape(m.shape[1:])
+
+
+def wrench_balance_friction(windows: PushWindows, body: PlanarBody, config: SlidingConfig) -> WrenchBalance | None:
+    """mu from each window's balance of the pushing wrench, the momentum change and Coulomb friction.
+
+    Over a window, the mean pushing force and its moment about the COM, less the change of momentum, equal
+    mu times the friction wrench that the window's mean twist (from its measured end poses) draws from the
+    support grid of the simulation (uniform pressure): linear in mu, solved by least squares. It needs no
+    simulation, so unlike a force-driven rollout it does not balance on the knife edge of a slow push (a
+    Coulomb object under a force a little below or above mu m g sticks or accelerates), and it holds for
+    pushes that turn the object, where steady force over m g (`quasi_static_friction`) does not.
+    Only windows in which the object slides throughout (`steady_windows`) are used: a window's mean twist
+    stands for its friction only then (a push in strokes, which stops the object, has few or none). None
+    when there is no such window.
+    """
+    period = windows.dt_s * windows.substeps
+    hx, hy, _ = body.half_extents_m
+    cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0
+    grid = np.array([(gx * hx, gy * hy) for gx in cells for gy in cells])  # support points, object frame [m]
+    normal_n = body.mass_kg * GRAVITY_M_S2 / len(grid)
+    lever_m = float(np.hypot(hx, hy))
+    span_s = windows.sample_count * period
+    steady = np.flatnonzero(steady_windows(windows, body, config))
+    if not len(steady):
+        return None
+    ends = _end_twist(windows)
+    rows, targets = [], []
+    for w in steady:
+        m = windows.measured[:, w]
+        v, omega = (m[-1, :2] - m[0, :2]) / span_s, (m[-1, 2] - m[0, 2]) / span_s
+        yaw = 0.5 * (m[0, 2] + m[-1, 2])
+        c, s_ = np.cos(yaw), np.sin(yaw)
+        r = grid @ np.array([[c, s_], [-s_, c]])  # support points about the COM, world axes
+        slip = v[None] + omega * np.c_[-r[:, 1], r[:, 0]]
+        u = slip / np.maximum(np.linalg.norm(slip, axis=1), 1e-12)[:, None]
+        friction = np.r_[-normal_n * u.sum(0), -normal_n * np.sum(r[:, 0] * u[:, 1] - r[:, 1] * u[:, 0]) / lever_m]
+        start, end = windows.start[w, 3:6], ends[w]
+        f = windows.window_force[:, w]
+        com = np.repeat(m[:-1, :2], windows.substeps, axis=0)
+        arm = windows.contact[:, w] - com
+        moment = float(np.mean(arm[:, 0] * f[:, 1] - arm[:, 1] * f[:, 0]))
+        change = np.r_[body.mass_kg * (end[:2] - start[:2]), body.izz_kgm2 * (end[2] - start[2]) / lever_m] / span_s
+        rows.append(friction)
+        targets.append(change - np.r_[f.mean(0), moment / lever_m])
+    X, y = np.asarray(rows), np.asarray(targets)
+    mu = float(np.sum(X * y) / np.sum(X * X))
+    residual = y - mu * X
+    dof = max(X.size - 1, 1)
+    std = float(np.sqrt(np.sum(residual**2) / dof / np.sum(X * X)))
+    per_window = np.sum(X * y, axis=1) / np.sum(X * X, axis=1)
+    return WrenchBalance(mu, std, per_window, float(np.sqrt(np.mean(residual**2))))
+
+
+@dataclass(frozen=True)
 class PushedIdentification:
     """What `identify_pushed` gives the build.
 
     fit: the sliding fit on the trials; biases: the force offset per trial;
     baseline and final: (position RMSE [m], heading RMSE [rad], loss [m^2]) of the
     windowed replay at the prior's and the fitted theta, on the held-out recording
-    when there is one, else on the trials; traces: the replay for the report.
+    when there is one, else on the trials; traces: the replay for the report;
+    balance: the quasi-static wrench balance on the trials (None without a steady window), the
+    measurement of mu where the fit's simulation sticks throughout (a slow push).
     """
 
     fit: SlidingFit
@@ -824,12 +976,14 @@ class PushedIdentification:
     final: tuple[float, float, float]
     traces: dict
     config: SlidingConfig
+    balance: WrenchBalance | None = None
 
     def provenance(self) -> dict:
         from dataclasses import asdict
 
         return {"kind": "sliding", **self.fit.provenance(), "prior_theta": list(map(float, self.prior_theta)),
                 "force_bias_world": [b.provenance() for b in self.biases],
+                "wrench_balance": self.balance.provenance() if self.balance else None,
                 "config": asdict(self.config)}
 
 
@@ -839,6 +993,7 @@ def identify_pushed(trials, holdout, body: PlanarBody, mu_prior: float, config: 
     biases = [estimate_force_bias(r, config) for r in trials]
     windows = concat_push_windows([push_windows(r, body, config, b) for r, b in zip(trials, biases)])
     fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=(True, config.fit_mass, True), device=device)
+    balance = wrench_balance_friction(windows, body, config)
     prior_theta = np.array([mu_prior, body.mass_kg, body.izz_kgm2])
     check = windows
     if holdout is not None:
@@ -858,4 +1013,5 @@ def identify_pushed(trials, holdout, body: PlanarBody, mu_prior: float, config: 
 
     traces = {"t_s": t, "measured_position": xyz(check.measured), "baseline_position": xyz(paths["baseline"]),
               "final_position": xyz(paths["final"]), "window_s": S * config.sample_period_s}
-    return PushedIdentification(fit, prior_theta, biases, metrics["baseline"], metrics["final"], traces, config)
+    return PushedIdentification(fit, prior_theta, biases, metrics["baseline"], metrics["final"], traces, config,
+                                balance)

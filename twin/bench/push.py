@@ -37,10 +37,18 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
 
     Modes: "m known" fits mu and I_zz with the true mass (objects of known mass, as
     in the MIT dataset); "m free" fits mu, m and I_zz from a mass prior
-    `prior_mass_factor` x the truth (what pushes alone can tell).
+    `prior_mass_factor` x the truth (what pushes alone can tell); "slow" is "m known" on a second
+    recording of the same block pushed in one continuous stroke at 30 mm/s, where the quasi-static wrench
+    balance ("wb") applies (the strokes of the others stop the block within most windows).
     """
     from pipelines.identify.sliding import (
-        PlanarBody, SlidingConfig, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
+        PlanarBody,
+        SlidingConfig,
+        estimate_force_bias,
+        identify_sliding,
+        push_windows,
+        quasi_static_friction,
+        wrench_balance_friction,
     )
     from pipelines.logs import read_recording
     from pipelines.synth.push import PushConfig, write_push
@@ -55,16 +63,21 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
                 offset_m=float(rng.uniform(-0.025, 0.025)), yaw0_rad=float(rng.uniform(-0.3, 0.3)),
                 force_bias_n=tuple(rng.uniform(-0.5, 0.5, 3)), seed=seed,
             )
-            path = Path(tmp) / f"push_{seed}.mcap"
-            truth = write_push(path, push)
-            rec = read_recording(path)
-            for mode, mass, free in (("m known", truth.mass_kg, (True, False, True)),
-                                     ("m free", truth.mass_kg * prior_mass_factor, (True, True, True))):
+            recordings = {}
+            for name, variant in (("strokes", push), ("slow", replace(push, speed_m_s=0.03, stroke_s=5.0, push_s=2.9))):
+                path = Path(tmp) / f"push_{seed}_{name}.mcap"
+                truth = write_push(path, variant)
+                recordings[name] = read_recording(path)
+            for mode, mass, free, rec in (
+                    ("m known", truth.mass_kg, (True, False, True), recordings["strokes"]),
+                    ("m free", truth.mass_kg * prior_mass_factor, (True, True, True), recordings["strokes"]),
+                    ("slow", truth.mass_kg, (True, False, True), recordings["slow"])):
                 t0 = time.perf_counter()
                 body = PlanarBody(push.half_extents_m, mass, box_izz(mass, push.half_extents_m))
                 bias = estimate_force_bias(rec, config)
                 windows = push_windows(rec, body, config, bias)
                 fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=free)
+                balance = wrench_balance_friction(windows, body, config)
                 rows.append({
                     "seed": seed, "mode": mode, "mu_true": truth.mu, "mu": float(fit.theta[0]),
                     "mu_err_pct": 100 * (fit.theta[0] / truth.mu - 1),
@@ -75,23 +88,27 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
                     "mu_qs_true_mass": quasi_static_friction(rec, body, config, bias, truth.mass_kg),
                     "bias_err_n": float(np.max(np.linalg.norm(bias.force_n - np.asarray(push.force_bias_n), axis=1))),
                     "rmse_mm": 1e3 * fit.rmse_position_m, "seconds": time.perf_counter() - t0,
+                    "mu_wb_err_pct": 100 * (balance.mu / truth.mu - 1) if balance else float("nan"),
+                    "wb_windows": len(balance.per_window) if balance else 0,
                 })
     print(f"prior mu = {mu_prior}; 'm free' starts from a mass prior = truth x {prior_mass_factor}; "
           f"'data' marks the parameters (mu, m, Izz) the pushes determined")
     print(f"{'seed':>4} {'mode':7} {'mu true':>7} {'mu':>6} {'mu err %':>8} {'mu*m err %':>10} {'m err %':>7} "
           f"{'Izz err %':>9} {'data':>4} {'turn deg':>8} {'win':>3} {'mu qs':>6} {'bias err N':>10} "
-          f"{'rmse mm':>7} {'s':>5}")
+          f"{'rmse mm':>7} {'wb err %':>8} {'st':>3} {'s':>5}")
     for r in rows:
         flags = "".join("y" if d else "n" for d in r["determined"])
         print(f"{r['seed']:4d} {r['mode']:7} {r['mu_true']:7.3f} {r['mu']:6.3f} {r['mu_err_pct']:+8.2f} "
               f"{r['mu_m_err_pct']:+10.2f} {r['mass_err_pct']:+7.2f} {r['izz_err_pct']:+9.2f} {flags:>4} "
               f"{r['turn_deg']:8.1f} {r['windows']:3d} {r['mu_qs_true_mass']:6.3f} {r['bias_err_n']:10.3f} "
-              f"{r['rmse_mm']:7.3f} {r['seconds']:5.1f}")
-    for mode in ("m known", "m free"):
+              f"{r['rmse_mm']:7.3f} {r['mu_wb_err_pct']:+8.2f} {r['wb_windows']:3d} {r['seconds']:5.1f}")
+    print("wb: the quasi-static wrench balance over its 'st' steady windows (none: the strokes stop the block)")
+    for mode in ("m known", "m free", "slow"):
         worst = max(abs(r["mu_err_pct"]) for r in rows if r["mode"] == mode)
         worst_mm = max(abs(r["mu_m_err_pct"]) for r in rows if r["mode"] == mode)
+        wb = [abs(r["mu_wb_err_pct"]) for r in rows if r["mode"] == mode and r["wb_windows"]]
         print(f"{mode}: worst |mu error| {worst:.2f} %, worst |mu*m error| {worst_mm:.2f} % over {seeds} seeds "
-              "(target: mu within 5 %)")
+              "(target: mu within 5 %)" + (f"; wrench balance worst {max(wb):.2f} % over {len(wb)}" if wb else ""))
     return rows
 
 
@@ -164,9 +181,15 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
     force before the block first moves, with the pusher already resting on it.
     """
     from pipelines.identify.sliding import (
-        ForceBias, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
+        ForceBias,
+        SlidingConfig,
+        SlidingRollout,
+        estimate_force_bias,
+        identify_sliding,
+        push_windows,
         quasi_static_friction,
         replay_errors,
+        wrench_balance_friction,
     )
 
     known = tuple(b.folder for b in BLOCKS)
@@ -198,7 +221,10 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
                 trials.append({"block": block.folder, "trial": trial_dir.name, "skipped": str(exc)})
                 continue
             fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=FREE)
+            balance = wrench_balance_friction(windows, body, config)
             row = {
+                "sliding": fit.sliding_windows, "mu_wb": balance.mu if balance else float("nan"),
+                "wb_windows": len(balance.per_window) if balance else 0,
                 "block": block.folder, "trial": trial_dir.name, "mu": float(fit.theta[0]),
                 "mass": float(fit.theta[1]), "mu_m": float(fit.theta[0] * fit.theta[1]),
                 "determined": fit.determined, "windows": fit.window_count,
@@ -245,9 +271,9 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
             })
 
     print("per trial (mass from the prior's material density unless 'data' says the pushes determined it):")
-    print(f"{'block':14} {'trial':20} {'mu':>6} {'m kg':>6} {'mu*m':>6} {'data':>4} {'win':>3} {'mu qs':>6} "
-          f"{'qs rest':>7} {'qs drift':>8} {'zeros':>5} {'drift N':>7} {'turn deg':>8} {'rmse mm':>7} "
-          f"{'rmse deg':>8} {'s':>5}")
+    print(f"{'block':14} {'trial':20} {'mu':>6} {'m kg':>6} {'mu*m':>6} {'data':>4} {'win':>3} {'slid':>4} "
+          f"{'mu wb':>6} {'st':>3} {'mu qs':>6} {'qs rest':>7} {'qs drift':>8} {'zeros':>5} {'drift N':>7} "
+          f"{'turn deg':>8} {'rmse mm':>7} {'rmse deg':>8} {'s':>5}")
     for r in trials:
         if "skipped" in r:
             print(f"{r['block']:14} {r['trial']:20} skipped: {r['skipped']}")
@@ -257,9 +283,12 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
         drift = float(np.linalg.norm(r["rest_n"] - r["away_n"]))
         zeros = f"{len(b.t_s)}{'r' if b.source.startswith('pusher resting') else 'a'}"
         print(f"{r['block']:14} {r['trial']:20} {r['mu']:6.3f} {r['mass']:6.3f} {r['mu_m']:6.3f} {flags:>4} "
-              f"{r['windows']:3d} {r['mu_qs_prior_mass']:6.3f} {r['mu_qs_resting_zero']:7.3f} "
+              f"{r['windows']:3d} {r['sliding']:4d} {r['mu_wb']:6.3f} {r['wb_windows']:3d} "
+              f"{r['mu_qs_prior_mass']:6.3f} {r['mu_qs_resting_zero']:7.3f} "
               f"{r['mu_qs_drift']:8.3f} {zeros:>5} "
               f"{drift:7.3f} {r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} {r['rmse_heading_deg']:8.2f} {r['seconds']:5.1f}")
+    print("slid: windows in which the fit's simulation slides (none: mu only bounded from below); mu wb: the "
+          "quasi-static wrench balance over its 'st' steady windows")
     print("zeros: how many force-offset zeros the fit used, 'a' with the pusher away, 'r' resting on the block before "
           "the push; qs rest: the quasi-static mu with the resting offset; qs drift: linear from that to the "
           "pusher-away zero after the push; drift N: their difference")

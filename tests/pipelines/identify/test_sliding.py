@@ -6,7 +6,16 @@ import numpy as np
 import pytest
 
 from pipelines.identify.sliding import (
-    PlanarBody, PushWindows, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
+    PlanarBody,
+    PushWindows,
+    SlidingConfig,
+    SlidingRollout,
+    estimate_force_bias,
+    identify_sliding,
+    push_windows,
+    sliding_windows,
+    steady_windows,
+    wrench_balance_friction,
 )
 from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack, read_recording
 from pipelines.synth.push import PushConfig, write_push
@@ -41,6 +50,17 @@ def test_sliding_block_decelerates_at_mu_g_net_of_the_push():
     t = 0.1
     expected = 0.2 * t - 0.5 * (0.3 * 9.81 - 1.0 / 0.8) * t * t
     assert path[-1, 0, 0] - path[0, 0, 0] == pytest.approx(expected, rel=0.03)
+
+
+def test_sliding_windows_tell_a_stuck_simulation_from_a_sliding_one():
+    """Pushed at 1 N, a 0.8 kg block measured gliding at 0.2 m/s slides in the simulation at mu 0.1 (mu m g
+    0.78 N) and sticks at mu 1.0, where it stops within 21 ms of its measured start speed."""
+    windows = _windows(1.0, 0.2)
+    rollout = SlidingRollout(windows, _box(0.8), SlidingConfig())
+    moving, slides = sliding_windows(rollout, np.array([0.1, 0.8, 0.8 * 0.02 / 12]))
+    assert moving.all() and slides.all()
+    moving, slides = sliding_windows(rollout, np.array([1.0, 0.8, 0.8 * 0.02 / 12]))
+    assert moving.all() and not slides.any()
 
 
 def test_grad_mu_mass_izz_matches_central_difference():
@@ -150,7 +170,44 @@ def test_friction_recovered_from_a_turning_push(push_recording):
                              free=(True, False, True))
     assert known.theta[0] == pytest.approx(0.35, rel=0.05)
     assert known.determined[0] and not known.determined[1]
+    assert known.sliding_windows >= 0.5 * known.window_count  # windows that end in a stroke's stop travel less
     assert known.rmse_position_m < 1e-3
+
+
+def test_friction_held_above_every_push_is_a_bound_not_a_measurement(push_recording):
+    """Confined to mu >= 1 on a push with mu 0.35, the simulated block sticks in every window: the fit says
+    mu is not determined (a lower bound) rather than reporting the bound with the curvature's small std."""
+    from dataclasses import replace
+
+    rec, _ = push_recording
+    sliding = replace(SlidingConfig(), mu_bounds=(1.0, 2.0))
+    bias = estimate_force_bias(rec, sliding)
+    fit = identify_sliding(push_windows(rec, _box(0.7), sliding, bias), _box(0.7), sliding, mu_prior=1.2,
+                           free=(True, False, False))
+    assert fit.sliding_windows == 0
+    assert not fit.determined[0] and fit.std[0] == 0.0
+    assert fit.provenance()["sliding_windows"] == 0
+
+
+def test_wrench_balance_measures_friction_of_a_slow_turning_push(tmp_path):
+    """One continuous 30 mm/s push that turns the block: the quasi-static wrench balance gives mu within 2 %
+    with no simulation. It keeps only windows in which the block slides throughout: a still block has none."""
+    from dataclasses import replace
+
+    config = PushConfig(mu=0.42, mass_kg=0.6, offset_m=-0.02, yaw0_rad=-0.1, speed_m_s=0.03, stroke_s=5.0,
+                        push_s=2.9, force_bias_n=(0.2, 0.1, 0.0), seed=5)
+    write_push(tmp_path / "slow.mcap", config)
+    rec = read_recording(tmp_path / "slow.mcap")
+    sliding = SlidingConfig()
+    windows = push_windows(rec, _box(0.6), sliding, estimate_force_bias(rec, sliding))
+    balance = wrench_balance_friction(windows, _box(0.6), sliding)
+    assert balance is not None and len(balance.per_window) >= 4
+    assert balance.mu == pytest.approx(0.42, rel=0.02)
+    assert balance.std < 0.02
+    # a block held still in every window is never steady, and has no balance
+    still = replace(windows, measured=np.repeat(windows.measured[:1], windows.sample_count + 1, axis=0))
+    assert not steady_windows(still, _box(0.6), sliding).any()
+    assert wrench_balance_friction(still, _box(0.6), sliding) is None
 
 
 def test_push_without_contact_topic_names_the_file(tmp_path):
