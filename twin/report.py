@@ -138,8 +138,11 @@ def write_report(path: Path, asset: dict, loss_history, traces: dict | None,
     """Write a self-contained HTML report (plots embedded as PNG); `traces` None (a diagnosis alone) leaves
     out the identification's replay plot."""
     theta = asset["theta"]
+    # a pushed object's friction comes from the sliding fit or, where that only bounds it, the wrench balance
+    how = {"friction": asset.get("provenance", {}).get("identify", {}).get("friction_from")}
     rows = "".join(
-        f"<tr><td>{k}</td><td>{_fmt(v['value'])}</td><td>{_fmt(v['std'])}</td><td>{v.get('source', '')}</td></tr>"
+        f"<tr><td>{k}</td><td>{_fmt(v['value'])}</td><td>{_fmt(v['std'])}</td><td>{v.get('source', '')}"
+        f"{f' ({html.escape(how[k])})' if how.get(k) else ''}</td></tr>"
         for k, v in theta.items()
     )
     fit = asset.get("fit", {})

@@ -878,9 +878,14 @@ class WrenchBalance:
 
 def steady_windows(windows: PushWindows, body: PlanarBody, config: SlidingConfig) -> np.ndarray:
     """Per window, whether the object slides throughout it: it travels at least config.moving_speed_m_s on
-    average, at least half a third of its travel over each third, and at its start and end at least half its
-    mean speed (travel: x, y and the heading as an arc at the face's half diagonal)."""
+    average and ten times the tracker's scatter about a quadratic in time, at least half a third of its
+    travel over each third, and at its start and end at least half its mean speed (travel: x, y and the
+    heading as an arc at the face's half diagonal)."""
     m = windows.measured
+    samples = np.arange(m.shape[0])
+    xy = m[..., :2].reshape(m.shape[0], -1)
+    fit = np.polynomial.polynomial.polyval(samples, np.polynomial.polynomial.polyfit(samples, xy, 2)).T
+    scatter = np.sqrt(np.mean(((xy - fit) ** 2).reshape(m.shape[0], -1, 2), axis=(0, 2)))
     arc = float(np.hypot(*body.half_extents_m[:2]))
     span_s = windows.sample_count * windows.dt_s * windows.substeps
     cuts = np.linspace(0, m.shape[0] - 1, 4).round().astype(int)
@@ -892,7 +897,7 @@ def steady_windows(windows: PushWindows, body: PlanarBody, config: SlidingConfig
     thirds = np.all([size(m[b] - m[a]) >= whole / 6 for a, b in pairwise(cuts)], axis=0)
     start, end = windows.start[:, 3:6], _end_twist(windows)
     mean_speed = whole / span_s
-    return ((whole >= config.moving_speed_m_s * span_s) & thirds
+    return ((whole >= np.maximum(config.moving_speed_m_s * span_s, 10.0 * scatter)) & thirds
             & (size(start) >= 0.5 * mean_speed) & (size(end) >= 0.5 * mean_speed))
 
 
