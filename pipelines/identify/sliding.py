@@ -50,6 +50,7 @@ __all__ = [
     "sliding_windows",
     "quasi_static_friction",
     "steady_windows",
+    "wrench_balance_error",
     "wrench_balance_friction",
     "WrenchBalance",
 ]
@@ -924,6 +925,32 @@ def wrench_balance_friction(windows: PushWindows, body: PlanarBody, config: Slid
     stands for its friction only then (a push in strokes, which stops the object, has few or none). None
     when there is no such window.
     """
+    balance = _balance_rows(windows, body, config)
+    if balance is None:
+        return None
+    X, y = balance
+    mu = float(np.sum(X * y) / np.sum(X * X))
+    residual = y - mu * X
+    dof = max(X.size - 1, 1)
+    std = float(np.sqrt(np.sum(residual**2) / dof / np.sum(X * X)))
+    per_window = np.sum(X * y, axis=1) / np.sum(X * X, axis=1)
+    return WrenchBalance(mu, std, per_window, float(np.sqrt(np.mean(residual**2))))
+
+
+def wrench_balance_error(windows: PushWindows, body: PlanarBody, config: SlidingConfig, mu: float) -> float | None:
+    """RMS [N] by which friction `mu` misses the steady windows' wrench balance (moments over the face's half
+    diagonal): the pushing wrench predicted from the measured motion, where a force-driven replay of a slow
+    push cannot predict the motion. None without a steady window."""
+    balance = _balance_rows(windows, body, config)
+    if balance is None:
+        return None
+    X, y = balance
+    return float(np.sqrt(np.mean((y - mu * X) ** 2)))
+
+
+def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig):
+    """Per steady window, the friction wrench per unit mu (X) and the momentum change less the pushing wrench
+    (y), world x, y [N] and the moment over the face's half diagonal [N]; None without a steady window."""
     period = windows.dt_s * windows.substeps
     hx, hy, _ = body.half_extents_m
     cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0
@@ -953,13 +980,7 @@ def wrench_balance_friction(windows: PushWindows, body: PlanarBody, config: Slid
         change = np.r_[body.mass_kg * (end[:2] - start[:2]), body.izz_kgm2 * (end[2] - start[2]) / lever_m] / span_s
         rows.append(friction)
         targets.append(change - np.r_[f.mean(0), moment / lever_m])
-    X, y = np.asarray(rows), np.asarray(targets)
-    mu = float(np.sum(X * y) / np.sum(X * X))
-    residual = y - mu * X
-    dof = max(X.size - 1, 1)
-    std = float(np.sqrt(np.sum(residual**2) / dof / np.sum(X * X)))
-    per_window = np.sum(X * y, axis=1) / np.sum(X * X, axis=1)
-    return WrenchBalance(mu, std, per_window, float(np.sqrt(np.mean(residual**2))))
+    return np.asarray(rows), np.asarray(targets)
 
 
 @dataclass(frozen=True)

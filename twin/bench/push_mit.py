@@ -66,6 +66,7 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
         push_windows,
         quasi_static_friction,
         replay_errors,
+        wrench_balance_error,
         wrench_balance_friction,
     )
     from pipelines.push_dataset import PushTrialName, read_push_trial
@@ -125,7 +126,10 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
             rollout = SlidingRollout(r["windows_data"], body, config)
             p_fit, h_fit = replay_errors(rollout, (mu_fit, body.mass_kg, body.izz_kgm2))
             p_prior, h_prior = replay_errors(rollout, (mu_prior, body.mass_kg, body.izz_kgm2))
+            f_fit, f_prior = (wrench_balance_error(r["windows_data"], body, config, mu) for mu in (mu_fit, mu_prior))
             prediction.append({
+                "force_n": f_fit if f_fit is not None else float("nan"),
+                "force_prior_n": f_prior if f_prior is not None else float("nan"),
                 "block": pair, "trial": r["trial"], "mu_fit": mu_fit, "mu_prior": mu_prior,
                 "pos_mm": 1e3 * p_fit, "pos_prior_mm": 1e3 * p_prior,
                 "heading_deg": float(np.degrees(h_fit)), "heading_prior_deg": float(np.degrees(h_prior)),
@@ -161,12 +165,16 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
     if prediction:
         from twin.bench.push import _plot_prediction
 
-        print(f"\npredictive validity, leave one out ({config.window_s} s windows from measured states, "
-              "measured force and contact):")
-        print(f"{'pair':16} {'trial':78} {'mu fit':>6} {'pos mm':>7} {'prior mm':>8} {'head deg':>8} {'prior deg':>9}")
+        print(f"\npredictive validity, leave one out: the motion replayed in {config.window_s} s windows from "
+              "measured states, measured force and contact (pos, head), and the pushing wrench predicted from the "
+              "measured motion by the wrench balance (force N: RMS miss over the steady windows), at the others' "
+              "mu and at the prior's:")
+        print(f"{'pair':16} {'trial':78} {'mu fit':>6} {'pos mm':>7} {'prior mm':>8} {'head deg':>8} {'prior deg':>9} "
+              f"{'force N':>7} {'prior N':>7}")
         for p in prediction:
             print(f"{p['block']:16} {p['trial']:78} {p['mu_fit']:6.3f} {p['pos_mm']:7.2f} {p['pos_prior_mm']:8.2f} "
-                  f"{p['heading_deg']:8.2f} {p['heading_prior_deg']:9.2f}")
+                  f"{p['heading_deg']:8.2f} {p['heading_prior_deg']:9.2f} {p['force_n']:7.3f} "
+                  f"{p['force_prior_n']:7.3f}")
         _plot_prediction(prediction, figure, "Held-out MIT pushing-dataset trials: object motion predicted from "
                          "measured pusher force and contact point")
         print(f"\nfigure: {figure}")

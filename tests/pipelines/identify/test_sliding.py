@@ -15,6 +15,7 @@ from pipelines.identify.sliding import (
     push_windows,
     sliding_windows,
     steady_windows,
+    wrench_balance_error,
     wrench_balance_friction,
 )
 from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack, read_recording
@@ -204,6 +205,9 @@ def test_wrench_balance_measures_friction_of_a_slow_turning_push(tmp_path):
     assert balance is not None and len(balance.per_window) >= 4
     assert balance.mu == pytest.approx(0.42, rel=0.02)
     assert balance.std < 0.02
+    # the pushing wrench predicted from the motion: missed by the balance's residual at its mu, more elsewhere
+    assert wrench_balance_error(windows, _box(0.6), sliding, balance.mu) == pytest.approx(balance.residual_n)
+    assert wrench_balance_error(windows, _box(0.6), sliding, 0.3) > 3 * balance.residual_n
     # a block held still in every window is never steady, and has no balance
     still = replace(windows, measured=np.repeat(windows.measured[:1], windows.sample_count + 1, axis=0))
     assert not steady_windows(still, _box(0.6), sliding).any()
