@@ -243,7 +243,10 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
         qs = np.array([r["mu_qs_prior_mass"] for r in per_block])
         qs_resting = np.array([r["mu_qs_resting_zero"] for r in per_block])
         qs_drift = np.array([r["mu_qs_drift"] for r in per_block])
+        wb = np.array([r["mu_wb"] for r in per_block if np.isfinite(r["mu_wb"])])
         summary.append({
+            "wb_trials": len(wb), "wb_mean": wb.mean() if len(wb) else float("nan"),
+            "wb_cv_pct": 100 * wb.std(ddof=1) / wb.mean() if len(wb) > 1 else float("nan"),
             "block": block.folder, "trials": len(per_block), "mu_mean": mus.mean(),
             "mu_cv_pct": 100 * mus.std(ddof=1) / mus.mean(),
             "mu_m_cv_pct": 100 * mums.std(ddof=1) / mums.mean(), "qs_mean": qs.mean(),
@@ -294,11 +297,12 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
           "pusher-away zero after the push; drift N: their difference")
     print("\nper block:")
     print(f"{'block':14} {'trials':>6} {'prior m kg':>10} {'mu prior':>8} {'mu mean':>7} {'mu CV %':>7} "
-          f"{'mu*m CV %':>9} {'qs mean':>7} {'qs CV %':>7} {'qs rest mean':>12} {'qs rest CV %':>12} "
-          f"{'qs drift mean':>13} {'qs drift CV %':>13}")
+          f"{'mu*m CV %':>9} {'wb trials':>9} {'wb mean':>7} {'wb CV %':>7} {'qs mean':>7} {'qs CV %':>7} "
+          f"{'qs rest mean':>12} {'qs rest CV %':>12} {'qs drift mean':>13} {'qs drift CV %':>13}")
     for s in summary:
         print(f"{s['block']:14} {s['trials']:6d} {s['prior_mass']:10.3f} {s['mu_prior']:8.3f} {s['mu_mean']:7.3f} "
-              f"{s['mu_cv_pct']:7.2f} {s['mu_m_cv_pct']:9.2f} {s['qs_mean']:7.3f} {s['qs_cv_pct']:7.2f} "
+              f"{s['mu_cv_pct']:7.2f} {s['mu_m_cv_pct']:9.2f} {s['wb_trials']:9d} {s['wb_mean']:7.3f} "
+              f"{s['wb_cv_pct']:7.2f} {s['qs_mean']:7.3f} {s['qs_cv_pct']:7.2f} "
               f"{s['qs_resting_mean']:12.3f} {s['qs_resting_cv_pct']:12.2f} {s['qs_drift_mean']:13.3f} "
               f"{s['qs_drift_cv_pct']:13.2f}")
     print("\npredictive validity: fitted on odd-numbered trials, predicting the others "
