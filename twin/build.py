@@ -55,6 +55,8 @@ class BuildConfig:
     wrench_rotation_xyzw: tuple[float, float, float, float] | None = None
     wrench_reaction: bool = False
     """The wrench messages give the force on the sensor (the object's reaction): negate them."""
+    push_min_speed_m_s: float = 0.01
+    """Pushed objects: a window is fitted only where the object's median speed exceeds this [m/s]."""
 
     def read(self, path: Path):
         """One recording, read with this build's topic, frame and rotation options (MCAP), or a
@@ -89,15 +91,7 @@ class StageTimer:
 def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     """Run every stage and write config.output atomically; returns the output directory."""
     from assets import (
-        Asset,
-        Estimate,
-        Fit,
-        Geometry,
-        Material,
-        Pose,
-        Theta,
-        asset_to_json,
-        write_asset,
+        Asset, Estimate, Fit, Geometry, Material, Pose, Theta, asset_to_json, write_asset,
     )
     from assets.materials import material_range
     from exporters import export_all
@@ -159,7 +153,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         from pipelines.identify.sliding import SlidingConfig, identify_pushed
 
         body, mu_prior = _sliding_body(mesh_object, prior)
-        sconfig = SlidingConfig()
+        sconfig = SlidingConfig(moving_speed_m_s=config.push_min_speed_m_s)
         pushed = timer.run("identify", identify_pushed, trials, holdout, body, mu_prior, sconfig)
         refit = None
         if config.diagnose:

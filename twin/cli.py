@@ -57,6 +57,9 @@ class Build:
     """Fixed sensor-to-world rotation of the wrench messages, quaternion x y z w (when the sensor frame is not in /tf)."""
     wrench_reaction: bool = False
     """The wrench messages give the force ON the sensor (a tool-mounted F/T sensor's reading): negate it."""
+    push_min_speed: float = 0.01
+    """Pushed objects: fit only windows where the object's median speed exceeds this [m/s]; lower it for slow
+    pushes (a 10 mm/s pusher moving the object at 1-3 mm/s), whose friction the wrench balance then measures."""
     diagnose: bool = True
     """Run the diagnose stage after identification (--no-diagnose skips it)."""
 
@@ -186,7 +189,7 @@ def _run_build(args: Build) -> None:
             vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind, base_mesh=args.base_mesh,
             topics=_role_map(args.topic, "--topic"), frames=_role_map(args.frame, "--frame"),
             wrench_rotation_xyzw=args.wrench_rotation, wrench_reaction=args.wrench_reaction,
-            diagnose=args.diagnose,
+            push_min_speed_m_s=args.push_min_speed, diagnose=args.diagnose,
         ),
         log=_log,
     )

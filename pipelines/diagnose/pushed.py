@@ -210,7 +210,9 @@ def _effect_params(name: str, fit: SlidingFit, recording) -> tuple[dict, dict]:
     M, *_ = np.linalg.lstsq(raw, resolved, rcond=None)
     frame = recording.wrench_raw.frame_id or "world"
     fixed = float(np.sqrt(np.mean((raw @ M - resolved) ** 2))) < 0.05 * float(np.std(resolved)) + 1e-9
-    force = np.linalg.solve(M.T, world) if fixed else world
+    # least squares, not solve: a reading with an axis that never varies (the MIT dataset's h5 trials
+    # carry no vertical force) leaves that axis of the map, and of the bias, undetermined
+    force = np.linalg.lstsq(M.T, world, rcond=None)[0] if fixed else world
     return ({"force": force.tolist(), "torque": [0.0, 0.0, 0.0]},
             {"frame": frame if fixed else "world", "force_world_n": world.tolist(),
              "std_world_n": [float(fit.effect_std[x]), float(fit.effect_std[y])],

@@ -15,6 +15,11 @@ uniformly loaded square within 2 %.
 Penalty friction in Newton is viscous below a slip speed (kf |v_t| < mu f_n)
 and Coulomb above; its gradient w.r.t. mu is zero in the viscous branch, so
 only windows in which the object slides are fitted (newton.md, "sticking").
+A slow, quasi-static push balances on a knife edge when driven by the measured
+force (a little below mu m g the object sticks, a little above it runs away):
+a fit whose simulation sticks in every window has only bounded mu
+(`sliding_windows`), and the wrench balance of the windows in which the object
+slides throughout measures it without a simulation (`wrench_balance_friction`).
 
 Parameters are theta = (mu, m [kg], I_zz [kg m^2]). Pushes that are nearly
 quasi-static determine mu * m (force balance) better than either alone; a
@@ -201,6 +206,13 @@ def _planar_grid(recording, config: "SlidingConfig", smooth: bool):
         xy = lowpass(xy, config.smoothing_hz, 1 / period)
         yaw = lowpass(yaw[:, None], config.smoothing_hz, 1 / period)[:, 0]
     return grid, xy, yaw
+
+
+def _support_points(body: PlanarBody) -> np.ndarray:
+    """The support face's point contacts (cell centres of a _GRID x _GRID grid), object frame x, y [m]."""
+    hx, hy, _ = body.half_extents_m
+    cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0
+    return np.array([(gx * hx, gy * hy) for gx in cells for gy in cells])
 
 
 def _yaw(quat_xyzw: np.ndarray) -> np.ndarray:
@@ -510,8 +522,8 @@ class SlidingRollout:
         hx, hy, hz = body.half_extents_m
         W = windows.window_count
         radius = 1e-3
-        cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0  # cell centres on [-1, 1]
-        n_contacts = _GRID * _GRID
+        support = _support_points(body)
+        n_contacts = len(support)
         ke = body.mass_kg * GRAVITY_M_S2 / config.contact_sink_m
         kd = 2.0 * config.contact_damping_ratio * np.sqrt(ke * body.mass_kg)
         cfg = newton.ModelBuilder.ShapeConfig(
@@ -522,10 +534,9 @@ class SlidingRollout:
         )
         sub = newton.ModelBuilder(gravity=(0.0, 0.0, -GRAVITY_M_S2), up_axis=newton.Axis.Z)
         b = sub.add_body(mass=body.mass_kg, inertia=wp.mat33(np.eye(3) * body.izz_kgm2), lock_inertia=True)
-        for gx in cells:
-            for gy in cells:
-                sub.add_shape_sphere(b, xform=wp.transform(wp.vec3(gx * hx, gy * hy, -hz + radius), wp.quat_identity()),
-                                     radius=radius, cfg=cfg)
+        for px, py in support:
+            sub.add_shape_sphere(b, xform=wp.transform(wp.vec3(px, py, -hz + radius), wp.quat_identity()),
+                                 radius=radius, cfg=cfg)
         builder = newton.ModelBuilder(gravity=(0.0, 0.0, -GRAVITY_M_S2), up_axis=newton.Axis.Z)
         builder.replicate(sub, W)
         builder.add_ground_plane(cfg=cfg)
@@ -675,8 +686,9 @@ class SlidingFit:
 
 def sliding_windows(rollout: SlidingRollout, theta, correction=None, effect=None) -> tuple[np.ndarray, np.ndarray]:
     """Per window: whether the measured object still moves over the window's second half (at least
-    config.moving_speed_m_s on average), and whether the simulation at theta then slides too (at least half
-    the measured travel; x, y and the heading as an arc at the face's half diagonal).
+    config.moving_speed_m_s on average), and whether the simulation at theta then slides too: at least half
+    the measured travel (x, y and the heading as an arc at the face's half diagonal), at a measured speed
+    of at least twice the slip speed mu g dt of Newton's penalty friction, below which it moves any body.
 
     A force-driven Coulomb model of a slow push balances on a knife edge: below the force over m g the
     object accelerates, above it it sticks, after coasting off its start velocity. Where the real object kept
@@ -693,7 +705,10 @@ def sliding_windows(rollout: SlidingRollout, theta, correction=None, effect=None
         return np.hypot(np.hypot(step[:, 0], step[:, 1]), step[:, 2] * rollout.yaw_length_m)
 
     moving = travel(measured) >= rollout.config.moving_speed_m_s * span_s
-    return moving, moving & (travel(simulated) >= 0.5 * travel(measured))
+    # below twice the penalty friction's slip speed (mu g dt) a simulated body moves in its viscous branch,
+    # whatever mu: that is creep of the step, not Coulomb sliding
+    coulomb = travel(measured) >= 2.0 * float(theta[0]) * GRAVITY_M_S2 * rollout.windows.dt_s * span_s
+    return moving, moving & coulomb & (travel(simulated) >= 0.5 * travel(measured))
 
 
 def replay_errors(rollout: SlidingRollout, theta, correction=None, effect=None) -> tuple[float, float]:
@@ -953,8 +968,7 @@ def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig)
     (y), world x, y [N] and the moment over the face's half diagonal [N]; None without a steady window."""
     period = windows.dt_s * windows.substeps
     hx, hy, _ = body.half_extents_m
-    cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0
-    grid = np.array([(gx * hx, gy * hy) for gx in cells for gy in cells])  # support points, object frame [m]
+    grid = _support_points(body)
     normal_n = body.mass_kg * GRAVITY_M_S2 / len(grid)
     lever_m = float(np.hypot(hx, hy))
     span_s = windows.sample_count * period

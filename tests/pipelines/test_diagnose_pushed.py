@@ -77,3 +77,21 @@ def test_stretches_end_with_their_recording_and_a_spread_mismatch_is_unexplained
     assert unexplained(spread, 0.2) == ()  # without a span only stretches are reported
     white = ResidualAnalysis(**{**spread.__dict__, "whiteness_p": [0.5] * 3})
     assert unexplained(white, 0.2, (0.0, 9.0), residual) == ()
+
+
+def test_sensor_bias_in_the_sensor_frame_when_a_force_axis_is_never_read():
+    """A planar F/T record (the MIT dataset's h5 trials: Fx, Fy, no Fz) whose raw axes are the world's turned
+    90 deg: the world offset found is given back in the sensor's frame, its unread vertical part left at zero."""
+    from types import SimpleNamespace
+
+    from pipelines.diagnose.pushed import _effect_params
+
+    rng = np.random.default_rng(0)
+    raw = np.c_[rng.normal(size=(200, 2)), np.zeros(200)]
+    resolved = raw @ np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # world = R raw
+    recording = SimpleNamespace(wrench_raw=SimpleNamespace(force=raw, frame_id="ft"),
+                                wrench=SimpleNamespace(force=resolved))
+    fit = SimpleNamespace(effect=np.array([0.1, -0.2, 0.0, 0.0, 0.0]), effect_std=np.zeros(5))
+    params, evidence = _effect_params("sensor_bias", fit, recording)
+    assert evidence["frame"] == "ft"
+    np.testing.assert_allclose(params["force"], [-0.2, -0.1, 0.0], atol=1e-9)

@@ -42,12 +42,7 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
     balance ("wb") applies (the strokes of the others stop the block within most windows).
     """
     from pipelines.identify.sliding import (
-        PlanarBody,
-        SlidingConfig,
-        estimate_force_bias,
-        identify_sliding,
-        push_windows,
-        quasi_static_friction,
+        PlanarBody, SlidingConfig, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
         wrench_balance_friction,
     )
     from pipelines.logs import read_recording
@@ -181,15 +176,8 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
     force before the block first moves, with the pusher already resting on it.
     """
     from pipelines.identify.sliding import (
-        ForceBias,
-        SlidingConfig,
-        SlidingRollout,
-        estimate_force_bias,
-        identify_sliding,
-        push_windows,
-        quasi_static_friction,
-        replay_errors,
-        wrench_balance_friction,
+        ForceBias, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
+        quasi_static_friction, replay_errors, wrench_balance_friction,
     )
 
     known = tuple(b.folder for b in BLOCKS)

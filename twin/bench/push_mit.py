@@ -62,15 +62,8 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
     and leave-one-out predictive validity; save the figure."""
     from assets.materials import material_range
     from pipelines.identify.sliding import (
-        SlidingConfig,
-        SlidingRollout,
-        estimate_force_bias,
-        identify_sliding,
-        push_windows,
-        quasi_static_friction,
-        replay_errors,
-        wrench_balance_error,
-        wrench_balance_friction,
+        SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
+        replay_errors, wrench_balance_error, wrench_balance_friction,
     )
     from pipelines.push_dataset import PushTrialName, read_push_trial
 

@@ -6,17 +6,8 @@ import numpy as np
 import pytest
 
 from pipelines.identify.sliding import (
-    PlanarBody,
-    PushWindows,
-    SlidingConfig,
-    SlidingRollout,
-    estimate_force_bias,
-    identify_sliding,
-    push_windows,
-    sliding_windows,
-    steady_windows,
-    wrench_balance_error,
-    wrench_balance_friction,
+    PlanarBody, PushWindows, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
+    sliding_windows, steady_windows, wrench_balance_error, wrench_balance_friction,
 )
 from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack, read_recording
 from pipelines.synth.push import PushConfig, write_push
@@ -55,12 +46,20 @@ def test_sliding_block_decelerates_at_mu_g_net_of_the_push():
 
 def test_sliding_windows_tell_a_stuck_simulation_from_a_sliding_one():
     """Pushed at 1 N, a 0.8 kg block measured gliding at 0.2 m/s slides in the simulation at mu 0.1 (mu m g
-    0.78 N) and sticks at mu 1.0, where it stops within 21 ms of its measured start speed."""
+    0.78 N) and sticks at mu 1.0, where it stops within 21 ms of its measured start speed; a block measured
+    creeping slower than the step's slip speed does not count as sliding."""
     windows = _windows(1.0, 0.2)
     rollout = SlidingRollout(windows, _box(0.8), SlidingConfig())
     moving, slides = sliding_windows(rollout, np.array([0.1, 0.8, 0.8 * 0.02 / 12]))
     assert moving.all() and slides.all()
     moving, slides = sliding_windows(rollout, np.array([1.0, 0.8, 0.8 * 0.02 / 12]))
+    assert moving.all() and not slides.any()
+    # at 3 mm/s, below twice the slip speed mu g dt (9.8 mm/s at mu 0.5 and 2 ms), a simulated body under
+    # 3 N < mu m g moves in the penalty friction's viscous branch: that is not sliding
+    from dataclasses import replace
+
+    creeping = SlidingRollout(_windows(3.0, 0.003), _box(0.8), replace(SlidingConfig(), moving_speed_m_s=1e-3))
+    moving, slides = sliding_windows(creeping, np.array([0.5, 0.8, 0.8 * 0.02 / 12]))
     assert moving.all() and not slides.any()
 
 
