@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
@@ -43,6 +44,7 @@ def test_build_sliding_measures_friction_and_marks_the_mass_prior(tmp_path):
     assert asset["fit"]["final"]["rmse_position_m"] < asset["fit"]["baseline"]["rmse_position_m"]
     assert all(check["ok"] for check in asset["provenance"]["validation"]["checks"])
     assert asset["provenance"]["identify"]["kind"] == "sliding"
+    assert asset["provenance"]["identify"]["friction_from"] == "sliding fit"  # a push that slides in the simulation
     # the diagnosis ran (each half of the push fitted on the other) and, the push being clean, found nothing
     assert asset["effects"] == [] and asset["provenance"]["diagnose"]["evaluation"] == "time-blocked cross-validation"
 
@@ -59,3 +61,23 @@ def test_malformed_topic_option_is_one_error_line(tmp_path):
     proc = twin("build", str(tmp_path / "x.obj"), "--logs", str(tmp_path / "y.mcap"), "--topic", "/netft_data")
     assert proc.returncode == 1
     assert "twin: error: --topic '/netft_data': expected ROLE=VALUE" in proc.stderr
+
+
+def test_friction_of_a_fit_that_only_bounds_mu():
+    """Where the sliding fit only bounds mu (its simulation stuck throughout), the build reports the wrench
+    balance as measured; without a steady window, the prior raised to the bound, marked prior."""
+    from types import SimpleNamespace
+
+    from twin.build import _sliding_friction
+
+    bound = SimpleNamespace(theta=np.array([0.38, 0.84, 1e-3]), std=np.zeros(3), determined=(False, False, False))
+    prior = SimpleNamespace(friction_kinetic=(0.32, 0.2, 0.45))
+    balance = SimpleNamespace(mu=0.31, std=0.01)
+    friction, source = _sliding_friction(bound, balance, prior)
+    assert source == "wrench balance" and friction.source == "measured"
+    assert friction.value == 0.31 and friction.interval95 == pytest.approx((0.2904, 0.3296))
+    friction, source = _sliding_friction(bound, None, prior)
+    assert friction.source == "prior" and friction.value == 0.38 and friction.interval95 == (0.38, 0.45)
+    measured = SimpleNamespace(theta=np.array([0.3, 0.84, 1e-3]), std=np.array([0.01, 0, 0]),
+                               determined=(True, False, False))
+    assert _sliding_friction(measured, balance, prior)[1] == "sliding fit"
