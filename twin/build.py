@@ -296,20 +296,20 @@ def _sliding_result(pushed, refit, diagnosis, body, prior):
 
 
 def _sliding_friction(fit, balance, prior):
-    """The friction coefficient and what gave it: the sliding fit; where its simulation stuck in every window
-    (a slow push: mu only bounded from below), the quasi-static wrench balance; without one, the prior raised
-    to the bound, marked "prior" with the bound as its interval's low end."""
+    """The friction coefficient and what gave it (`measured_friction`); where neither the sliding fit nor the
+    wrench balance measured it, the prior raised to the fit's bound, marked "prior" with the bound as its
+    interval's low end."""
     from assets import Estimate
+    from pipelines.identify.sliding import measured_friction
 
-    mu, mu_std = float(fit.theta[0]), float(fit.std[0])
-    if fit.determined[0]:
-        return Estimate(mu, mu_std, interval95=(mu - 1.96 * mu_std, mu + 1.96 * mu_std)), "sliding fit"
-    if balance is not None:
-        return (Estimate(balance.mu, balance.std, interval95=(balance.mu - 1.96 * balance.std,
-                                                               balance.mu + 1.96 * balance.std)), "wrench balance")
+    measured = measured_friction(fit, balance)
+    if measured is not None:
+        mu, std, source = measured
+        return Estimate(mu, std, interval95=(mu - 1.96 * std, mu + 1.96 * std)), source
+    bound = float(fit.theta[0])
     central, _, high = map(float, prior.friction_kinetic)
-    value = max(central, mu)
-    return (Estimate(value, (max(high, value) - mu) / 4, source="prior", interval95=(mu, max(high, value))),
+    value = max(central, bound)
+    return (Estimate(value, (max(high, value) - bound) / 4, source="prior", interval95=(bound, max(high, value))),
             "prior, above the sliding fit's bound")
 
 

@@ -50,6 +50,7 @@ __all__ = [
     "estimate_force_bias",
     "identify_pushed",
     "identify_sliding",
+    "measured_friction",
     "replay_errors",
     "push_windows",
     "sliding_windows",
@@ -213,6 +214,11 @@ def _support_points(body: PlanarBody) -> np.ndarray:
     hx, hy, _ = body.half_extents_m
     cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0
     return np.array([(gx * hx, gy * hy) for gx in cells for gy in cells])
+
+
+def _planar_travel(step: np.ndarray, arc_m: float) -> np.ndarray:
+    """Size of planar steps (..., 3: x, y [m], yaw [rad]), the heading counted as an arc of arc_m [m]."""
+    return np.hypot(np.hypot(step[..., 0], step[..., 1]), step[..., 2] * arc_m)
 
 
 def _yaw(quat_xyzw: np.ndarray) -> np.ndarray:
@@ -701,8 +707,7 @@ def sliding_windows(rollout: SlidingRollout, theta, correction=None, effect=None
     span_s = (measured.shape[0] - 1 - half) * rollout.windows.dt_s * rollout.windows.substeps
 
     def travel(track):
-        step = track[-1] - track[half]
-        return np.hypot(np.hypot(step[:, 0], step[:, 1]), step[:, 2] * rollout.yaw_length_m)
+        return _planar_travel(track[-1] - track[half], rollout.yaw_length_m)
 
     moving = travel(measured) >= rollout.config.moving_speed_m_s * span_s
     # below twice the penalty friction's slip speed (mu g dt) a simulated body moves in its viscous branch,
@@ -905,26 +910,25 @@ def steady_windows(windows: PushWindows, body: PlanarBody, config: SlidingConfig
     arc = float(np.hypot(*body.half_extents_m[:2]))
     span_s = windows.sample_count * windows.dt_s * windows.substeps
     cuts = np.linspace(0, m.shape[0] - 1, 4).round().astype(int)
-
-    def size(step):
-        return np.hypot(np.hypot(step[..., 0], step[..., 1]), step[..., 2] * arc)
-
-    whole = size(m[-1] - m[0])
-    thirds = np.all([size(m[b] - m[a]) >= whole / 6 for a, b in pairwise(cuts)], axis=0)
-    start, end = windows.start[:, 3:6], _end_twist(windows)
+    whole = _planar_travel(m[-1] - m[0], arc)
+    thirds = np.all([_planar_travel(m[b] - m[a], arc) >= whole / 6 for a, b in pairwise(cuts)], axis=0)
+    start, end = windows.start[:, 3:6], _end_twist(windows, config)
     mean_speed = whole / span_s
     return ((whole >= np.maximum(config.moving_speed_m_s * span_s, 10.0 * scatter)) & thirds
-            & (size(start) >= 0.5 * mean_speed) & (size(end) >= 0.5 * mean_speed))
+            & (_planar_travel(start, arc) >= 0.5 * mean_speed) & (_planar_travel(end, arc) >= 0.5 * mean_speed))
 
 
-def _end_twist(windows: PushWindows) -> np.ndarray:
-    """x, y rates [m/s] and yaw rate [rad/s] at each window's end: slope of a quadratic through its last samples."""
-    period = windows.dt_s * windows.substeps
-    n = min(windows.sample_count + 1, 7)
-    tail = np.arange(1 - n, 1) * period
-    m = windows.measured[-n:]
-    coef = np.polynomial.polynomial.polyfit(tail, m.reshape(n, -1), 2)[1]
-    return coef.reshape(m.shape[1:])
+def _end_twist(windows: PushWindows, config: SlidingConfig) -> np.ndarray:
+    """x, y rates [m/s] and yaw rate [rad/s] at each window's end [W, 3], by the quadratic fit that gives its
+    start's (`local_twist`), one-sided over as many samples as the start's centred one."""
+    S = windows.sample_count
+    t = np.arange(S + 1) * windows.dt_s * windows.substeps
+    out = []
+    for m in np.moveaxis(windows.measured, 1, 0):
+        rot = Rotation.from_rotvec(np.c_[np.zeros((S + 1, 2)), m[:, 2]])
+        twist = local_twist(t, np.c_[m[:, :2], np.zeros(S + 1)], rot, S, 2 * config.twist_half_width)
+        out.append([twist[0], twist[1], twist[5]])
+    return np.asarray(out)
 
 
 def wrench_balance_friction(windows: PushWindows, body: PlanarBody, config: SlidingConfig) -> WrenchBalance | None:
@@ -975,7 +979,7 @@ def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig)
     steady = np.flatnonzero(steady_windows(windows, body, config))
     if not len(steady):
         return None
-    ends = _end_twist(windows)
+    ends = _end_twist(windows, config)
     rows, targets = [], []
     for w in steady:
         m = windows.measured[:, w]
@@ -995,6 +999,16 @@ def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig)
         rows.append(friction)
         targets.append(change - np.r_[f.mean(0), moment / lever_m])
     return np.asarray(rows), np.asarray(targets)
+
+
+def measured_friction(fit: SlidingFit, balance: WrenchBalance | None) -> tuple[float, float, str] | None:
+    """mu, its standard deviation and what measured it: the sliding fit where it determined mu, else (its
+    simulation stuck throughout: a bound) the wrench balance; None when neither measured it."""
+    if fit.determined[0]:
+        return float(fit.theta[0]), float(fit.std[0]), "sliding fit"
+    if balance is not None:
+        return balance.mu, balance.std, "wrench balance"
+    return None
 
 
 @dataclass(frozen=True)

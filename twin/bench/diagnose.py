@@ -423,7 +423,6 @@ def bench_diagnose_push_real(blocks: tuple[str, ...] = (), seed: int = 0) -> lis
     return rows
 
 
-
 PUSH_SYNTH_EFFECTS = ("viscous_damping", "time_delay", None)
 """Concealed in the synthetic pushes, in turn (None: clean)."""
 
@@ -483,6 +482,7 @@ def bench_diagnose_push_synth(seeds: int = 3) -> list[dict]:
     print(f"top-1 right: {sum(r['found'] == r['concealed'] for r in concealed)}/{len(concealed)} concealed; "
           f"nothing reported on clean: {sum(not r['all_found'] for r in clean)}/{len(clean)}")
     return rows
+
 
 def _format_effects(effects: dict) -> str:
     def fmt(v):

@@ -62,8 +62,8 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
     and leave-one-out predictive validity; save the figure."""
     from assets.materials import material_range
     from pipelines.identify.sliding import (
-        SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
-        replay_errors, wrench_balance_error, wrench_balance_friction,
+        SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, measured_friction, push_windows,
+        quasi_static_friction, replay_errors, wrench_balance_error, wrench_balance_friction,
     )
     from pipelines.push_dataset import PushTrialName, read_push_trial
 
@@ -93,8 +93,8 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
         mu_qs = quasi_static_friction(rec, body, config, bias, body.mass_kg)
         fit = identify_sliding(windows, body, config, mu_prior=mu_qs, free=(True, False, False))
         balance = wrench_balance_friction(windows, body, config)
-        # as a build reports it: the sliding fit, or the wrench balance where the fit's simulation sticks
-        chosen = (float(fit.theta[0]) if fit.determined[0] else balance.mu if balance is not None else float("nan"))
+        measured = measured_friction(fit, balance)  # as a build reports it
+        chosen = measured[0] if measured is not None else float("nan")
         rows.append({**row, "mu": float(fit.theta[0]), "mu_std": float(fit.std[0]), "windows": fit.window_count,
                      "sliding": fit.sliding_windows, "determined": fit.determined[0],
                      "mu_wb": balance.mu if balance else float("nan"), "mu_wb_std": balance.std if balance else 0.0,
