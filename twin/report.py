@@ -20,6 +20,8 @@ def _figure_png(fig) -> str:
 
 
 def _trajectory_plot(traces: dict) -> str:
+    """The replayed windows against the measured track: x, y, z (x, y and the heading for a pushed object,
+    whose traces carry headings) and the errors, at the prior's parameters and the identified ones."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -27,23 +29,35 @@ def _trajectory_plot(traces: dict) -> str:
 
     t = np.asarray(traces["t_s"])
     order = np.argsort(t, kind="stable")
-    meas = np.asarray(traces["measured_position"])[order]
-    fig, axes = plt.subplots(4, 1, figsize=(9, 9), sharex=True)
-    for k, axis in enumerate("xyz"):
-        ax = axes[k]
-        ax.plot(t[order], meas[:, k], ".", ms=2, color="black", label="measured")
-        for label, color in (("baseline", "tab:red"), ("final", "tab:blue")):
-            sim = np.asarray(traces[f"{label}_position"])[order]
-            ax.plot(t[order], sim[:, k], ".", ms=2, color=color, label=f"simulated ({label})")
-        ax.set_ylabel(f"{axis} [m]")
+    t = t - t[order[0]]  # bag stamps are epoch seconds
+    runs = {"measured": "black", "baseline": "tab:red", "final": "tab:blue"}
+    labels = {"measured": "measured", "baseline": "simulated, prior", "final": "simulated, identified"}
+    position = {k: np.asarray(traces[f"{k}_position"])[order] for k in runs}
+    planar = "measured_heading_rad" in traces
+    axes_named = "xy" if planar else "xyz"
+    channels = [(f"{a} [m]", {k: p[:, i] for k, p in position.items()}) for i, a in enumerate(axes_named)]
+    if planar:
+        channels.append(("heading [deg]", {k: np.degrees(np.asarray(traces[f"{k}_heading_rad"]))[order] for k in runs}))
+    errors = [("position error [m]", {k: np.linalg.norm(position[k] - position["measured"], axis=1)
+                                      for k in ("baseline", "final")})]
+    if planar:
+        errors.append(("heading error [deg]", {k: np.abs(v - channels[-1][1]["measured"])
+                                               for k, v in channels[-1][1].items() if k != "measured"}))
+    fig, axes = plt.subplots(len(channels) + len(errors), 1, figsize=(9, 2.3 * (len(channels) + len(errors))),
+                             sharex=True)
+    for ax, (name, series) in zip(axes, channels):
+        for k, v in series.items():
+            ax.plot(t[order], v, ".", ms=2, color=runs[k], label=labels[k])
+        ax.set_ylabel(name)
+    for ax, (name, series) in zip(axes[len(channels):], errors):
+        for k, v in series.items():
+            shown = v > 0  # each window starts at the measured state
+            ax.semilogy(t[order][shown], v[shown], ".", ms=2, color=runs[k], label=labels[k])
+        ax.set_ylabel(name)
     axes[0].legend(loc="upper right", markerscale=4)
-    axes[0].set_title(f"Tracked frame, windows of {traces['window_s']:.2f} s replayed from measured states")
-    for label, color in (("baseline", "tab:red"), ("final", "tab:blue")):
-        err = np.linalg.norm(np.asarray(traces[f"{label}_position"]) - np.asarray(traces["measured_position"]), axis=1)
-        axes[3].semilogy(t[order], np.maximum(err[order], 1e-7), ".", ms=2, color=color, label=label)
-    axes[3].set_ylabel("position error [m]")
-    axes[3].set_xlabel("time [s]")
-    axes[3].legend(loc="upper right", markerscale=4)
+    axes[0].set_title(f"{traces.get('replayed', 'Tracked frame').capitalize()}: windows of {traces['window_s']:.2f} s "
+                      "replayed from measured states")
+    axes[-1].set_xlabel("time since the first window [s]")
     return _figure_png(fig)
 
 

@@ -34,7 +34,7 @@ from assets import Effect, FitMetrics
 from pipelines.identify.noise import estimate_noise_levels
 from pipelines.identify.sliding import (
     EFFECT_SLOTS, PlanarBody, PushWindows, SlidingConfig, SlidingFit, SlidingRollout, concat_push_windows,
-    estimate_force_bias, identify_sliding, push_windows,
+    estimate_force_bias, identify_sliding, push_windows, turn_check,
 )
 
 from .residuals import analyse_planar_residual, describe, unexplained
@@ -173,8 +173,9 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
                                             recordings=names[s["recording"]])
                  for k, s in series.items()}
     t_after = series["after"]["t_s"]
-    left = unexplained(residuals["after"], config.unexplained_share, (t_after.min(), t_after.max()),
-                       series["after"]["residual"])
+    left = (*unexplained(residuals["after"], config.unexplained_share, (t_after.min(), t_after.max()),
+                         series["after"]["residual"]),
+            *_turns_against_friction(parts, names, body, sconfig, series["after"]))
     traces = {"t_s": series["before"]["t_s"].tolist(),
               "measured_position": series["before"]["measured"].tolist(),
               "before_position": (series["before"]["measured"] + series["before"]["position_error"]).tolist(),
@@ -225,6 +226,29 @@ def _metrics(refits: list[_Refit], length: float) -> FitMetrics:
     return FitMetrics(rmse_position_m=float(np.sqrt(np.mean(np.sum(r[..., :2] ** 2, -1)))),
                       rmse_rotation_rad=float(np.sqrt(np.mean(r[..., 2] ** 2)) / length),
                       loss=float(np.mean(np.sum(r**2, -1))))
+
+
+def _turns_against_friction(parts: list, names: np.ndarray, body, sconfig: SlidingConfig, after: dict) -> tuple:
+    """DESIGN.md `unexplained` entries for the windows whose turn no friction coefficient explains (`turn_check`),
+    with the share of the chosen model's evaluation residual in them."""
+    energy = float(np.sum(after["residual"] ** 2))
+    span_s = parts[0].sample_count * sconfig.sample_period_s
+    out = []
+    for index, (part, name) in enumerate(zip(parts, names)):
+        check = turn_check(part, body, sconfig)
+        for w in np.flatnonzero(check.drives_turn):
+            a, b = float(part.t_start_s[w]), float(part.t_start_s[w] + span_s)
+            inside = (after["recording"] == index) & (after["t_s"] > a) & (after["t_s"] <= b)
+            out.append({
+                "summary": f"t = {a:.2f}-{b:.2f} s of {name}: the object turns "
+                           f"{np.degrees(check.turn_rad[w]):+.1f} deg while the pushing moment "
+                           f"({check.pushing_nm[w]:+.4f} N m) and its angular momentum "
+                           f"leave a friction moment of {check.friction_nm[w]:+.4f} N m that drives the turn: no "
+                           "friction coefficient explains it (the contact point, the force direction, the COM "
+                           "or the support pressure's symmetry is off)",
+                "where": {"t_s": [a, b]},
+                "share": float(np.sum(after["residual"][inside] ** 2) / energy) if energy > 0 else 0.0})
+    return tuple(out)
 
 
 def _series(refits: list[_Refit], sconfig: SlidingConfig) -> dict:

@@ -56,6 +56,8 @@ __all__ = [
     "sliding_windows",
     "quasi_static_friction",
     "steady_windows",
+    "turn_check",
+    "TurnCheck",
     "wrench_balance_error",
     "wrench_balance_friction",
     "WrenchBalance",
@@ -967,6 +969,51 @@ def wrench_balance_error(windows: PushWindows, body: PlanarBody, config: Sliding
     return float(np.sqrt(np.mean((y - mu * X) ** 2)))
 
 
+def _pushing_moment(windows: PushWindows) -> np.ndarray:
+    """Per window, the mean moment of the pushing force about the measured COM [N m], and the mean of its size."""
+    com = np.repeat(windows.measured[:-1, :, :2], windows.substeps, axis=0)
+    arm, f = windows.contact - com, windows.window_force
+    moment = arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0]
+    return moment.mean(axis=0), np.abs(moment).mean(axis=0)
+
+
+@dataclass(frozen=True)
+class TurnCheck:
+    """Result of `turn_check`, per window: the turn [rad], the pushing moment and the mean friction moment the
+    turn requires [N m], and whether friction would have to drive the turn (no mu explains the window)."""
+
+    turn_rad: np.ndarray
+    pushing_nm: np.ndarray
+    friction_nm: np.ndarray
+    drives_turn: np.ndarray
+
+
+def turn_check(windows: PushWindows, body: PlanarBody, config: SlidingConfig, margin: float = 0.1) -> TurnCheck:
+    """Whether each window's turn can come from its pushing moment at any friction coefficient.
+
+    Over a window the friction moment about the COM is the change of angular momentum less the pushing moment.
+    Coulomb friction under a pressure symmetric about the COM opposes the turn at every instant (the unit-slip
+    map is monotone: the friction moments of the points r and -r sum against the rotation), so in a window in
+    which the object turns one way (90 % of its pose steps) and the required friction moment has the turn's
+    sign, by more than `margin` of the mean pushing moment's size, no mu explains it: the pushing moment's
+    arm (contact point, force direction), the COM or the pressure's symmetry is off. "Turns one way": each
+    third of the window turns the way the whole does, which turns ten times the heading's scatter about a
+    quadratic in time (an object that does not turn can hold any moment below its friction's).
+    """
+    span_s = windows.sample_count * windows.dt_s * windows.substeps
+    yaw = windows.measured[..., 2]
+    turn = yaw[-1] - yaw[0]
+    samples = np.arange(len(yaw))
+    fit = np.polynomial.polynomial.polyval(samples, np.polynomial.polynomial.polyfit(samples, yaw, 2)).T
+    scatter = np.sqrt(np.mean((yaw - fit) ** 2, axis=0))
+    cuts = np.linspace(0, len(yaw) - 1, 4).round().astype(int)
+    one_way = np.all([np.sign(yaw[b] - yaw[a]) == np.sign(turn) for a, b in pairwise(cuts)], axis=0)
+    pushing, size = _pushing_moment(windows)
+    friction = body.izz_kgm2 * (_end_twist(windows, config)[:, 2] - windows.start[:, 5]) / span_s - pushing
+    drives = one_way & (np.abs(turn) >= 10 * scatter) & (friction * np.sign(turn) > margin * size)
+    return TurnCheck(turn, pushing, friction, drives)
+
+
 def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig):
     """Per steady window, the friction wrench per unit mu (X) and the momentum change less the pushing wrench
     (y), world x, y [N] and the moment over the face's half diagonal [N]; None without a steady window."""
@@ -980,6 +1027,7 @@ def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig)
     if not len(steady):
         return None
     ends = _end_twist(windows, config)
+    moments, _ = _pushing_moment(windows)
     rows, targets = [], []
     for w in steady:
         m = windows.measured[:, w]
@@ -992,12 +1040,9 @@ def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig)
         friction = np.r_[-normal_n * u.sum(0), -normal_n * np.sum(r[:, 0] * u[:, 1] - r[:, 1] * u[:, 0]) / lever_m]
         start, end = windows.start[w, 3:6], ends[w]
         f = windows.window_force[:, w]
-        com = np.repeat(m[:-1, :2], windows.substeps, axis=0)
-        arm = windows.contact[:, w] - com
-        moment = float(np.mean(arm[:, 0] * f[:, 1] - arm[:, 1] * f[:, 0]))
         change = np.r_[body.mass_kg * (end[:2] - start[:2]), body.izz_kgm2 * (end[2] - start[2]) / lever_m] / span_s
         rows.append(friction)
-        targets.append(change - np.r_[f.mean(0), moment / lever_m])
+        targets.append(change - np.r_[f.mean(0), moments[w] / lever_m])
     return np.asarray(rows), np.asarray(targets)
 
 
@@ -1017,8 +1062,9 @@ class PushedIdentification:
 
     fit: the sliding fit on the trials; biases: the force offset per trial;
     baseline and final: (position RMSE [m], heading RMSE [rad], loss [m^2]) of the
-    windowed replay at the prior's and the fitted theta, on the held-out recording
-    when there is one, else on the trials; traces: the replay for the report;
+    windowed replay at the prior's and the fitted theta (mu as `measured_friction` gives it), on the
+    held-out recording when there is one, else on the trials; traces: the replay for the report
+    (positions and headings);
     balance: the quasi-static wrench balance on the trials (None without a steady window), the
     measurement of mu where the fit's simulation sticks throughout (a slow push).
     """
@@ -1049,12 +1095,15 @@ def identify_pushed(trials, holdout, body: PlanarBody, mu_prior: float, config: 
     fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=(True, config.fit_mass, True), device=device)
     balance = wrench_balance_friction(windows, body, config)
     prior_theta = np.array([mu_prior, body.mass_kg, body.izz_kgm2])
+    # replayed at the friction reported: where the fit only bounds mu, the wrench balance's
+    measured = measured_friction(fit, balance)
+    final_theta = np.r_[measured[0] if measured is not None else fit.theta[0], fit.theta[1:]]
     check = windows
     if holdout is not None:
         check = push_windows(holdout, body, config, estimate_force_bias(holdout, config))
     rollout = SlidingRollout(check, body, config, device)
     metrics, paths = {}, {}
-    for name, theta in (("baseline", prior_theta), ("final", fit.theta)):
+    for name, theta in (("baseline", prior_theta), ("final", final_theta)):
         r = rollout.residuals(theta)
         p, h = replay_errors(rollout, theta)
         metrics[name] = (p, h, float(np.sum(r**2)))
@@ -1065,7 +1114,9 @@ def identify_pushed(trials, holdout, body: PlanarBody, mu_prior: float, config: 
     def xyz(a):
         return np.c_[a[..., :2].reshape(-1, 2), np.zeros(len(t))]
 
-    traces = {"t_s": t, "measured_position": xyz(check.measured), "baseline_position": xyz(paths["baseline"]),
-              "final_position": xyz(paths["final"]), "window_s": S * config.sample_period_s}
+    traces = {"t_s": t, "window_s": S * config.sample_period_s,
+              "replayed": "held-out recording" if holdout is not None else "fitted trials",
+              **{f"{k}_position": xyz(a) for k, a in (("measured", check.measured), *paths.items())},
+              **{f"{k}_heading_rad": a[..., 2].ravel() for k, a in (("measured", check.measured), *paths.items())}}
     return PushedIdentification(fit, prior_theta, biases, metrics["baseline"], metrics["final"], traces, config,
                                 balance)

@@ -63,7 +63,7 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
     from assets.materials import material_range
     from pipelines.identify.sliding import (
         SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, measured_friction, push_windows,
-        quasi_static_friction, replay_errors, wrench_balance_error, wrench_balance_friction,
+        quasi_static_friction, replay_errors, turn_check, wrench_balance_error, wrench_balance_friction,
     )
     from pipelines.push_dataset import PushTrialName, read_push_trial
 
@@ -100,7 +100,7 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
                      "mu_wb": balance.mu if balance else float("nan"), "mu_wb_std": balance.std if balance else 0.0,
                      "wb_windows": len(balance.per_window) if balance else 0,
                      "wb_residual_n": balance.residual_n if balance else float("nan"), "mu_chosen": chosen,
-                     "mu_qs": mu_qs,
+                     "mu_qs": mu_qs, "against": int(turn_check(windows, body, config).drives_turn.sum()),
                      "rmse_mm": 1e3 * fit.rmse_position_m, "rmse_deg": float(np.degrees(fit.rmse_heading_rad)),
                      "seconds": time.perf_counter() - t0, "windows_data": windows, "body": body})
 
@@ -139,10 +139,11 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
     print("mu: the Newton sliding fit; 'slid': windows in which its simulation slides (with none it sticks "
           "throughout and mu is only a lower bound, '>='); mu wb: the quasi-static wrench balance over the 'st' "
           "steady windows, its residual 'wb res'; mu qs: steady force over m g; 'reported': what a build reports "
-          "(the fit, or the balance where the fit is a bound)")
+          "(the fit, or the balance where the fit is a bound); 'against': windows whose turn no mu explains "
+          "(friction would have to drive it: `turn_check`)")
     print(f"{'trial':78} {'m kg':>6} {'mu':>7} {'mu std':>6} {'win':>3} {'slid':>4} {'mu wb':>6} {'wb std':>6} "
-          f"{'st':>3} {'wb res N':>8} {'mu qs':>6} {'reported':>8} {'turn deg':>8} {'bias N':>6} {'rmse mm':>7} "
-          f"{'rmse deg':>8} {'s':>5}")
+          f"{'st':>3} {'wb res N':>8} {'mu qs':>6} {'reported':>8} {'turn deg':>8} {'against':>7} {'bias N':>6} "
+          f"{'rmse mm':>7} {'rmse deg':>8} {'s':>5}")
     for r in rows:
         if "skipped" in r:
             print(f"{r['trial']:78} {r['mass']:6.3f} skipped: {r['skipped']} (turn {r['turn_deg']:.1f} deg)")
@@ -150,7 +151,8 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
         mu = f"{r['mu']:.3f}" if r["determined"] else f">={r['mu']:.3f}"
         print(f"{r['trial']:78} {r['mass']:6.3f} {mu:>7} {r['mu_std']:6.3f} {r['windows']:3d} {r['sliding']:4d} "
               f"{r['mu_wb']:6.3f} {r['mu_wb_std']:6.3f} {r['wb_windows']:3d} {r['wb_residual_n']:8.3f} "
-              f"{r['mu_qs']:6.3f} {r['mu_chosen']:8.3f} {r['turn_deg']:8.1f} {r['bias_n']:6.3f} {r['rmse_mm']:7.2f} "
+              f"{r['mu_qs']:6.3f} {r['mu_chosen']:8.3f} {r['turn_deg']:8.1f} {r['against']:7d} {r['bias_n']:6.3f} "
+              f"{r['rmse_mm']:7.2f} "
               f"{r['rmse_deg']:8.2f} {r['seconds']:5.1f}")
     print("\nper object / surface:")
     print(f"{'pair':16} {'trials':>6} {'measured':>8} {'mu mean':>7} {'mu CV %':>7} {'qs mean':>7} {'qs CV %':>7}"

@@ -7,7 +7,7 @@ import pytest
 
 from pipelines.identify.sliding import (
     PlanarBody, PushWindows, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
-    sliding_windows, steady_windows, wrench_balance_error, wrench_balance_friction,
+    sliding_windows, steady_windows, turn_check, wrench_balance_error, wrench_balance_friction,
 )
 from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack, read_recording
 from pipelines.synth.push import PushConfig, write_push
@@ -211,6 +211,27 @@ def test_wrench_balance_measures_friction_of_a_slow_turning_push(tmp_path):
     still = replace(windows, measured=np.repeat(windows.measured[:1], windows.sample_count + 1, axis=0))
     assert not steady_windows(still, _box(0.6), sliding).any()
     assert wrench_balance_friction(still, _box(0.6), sliding) is None
+
+
+def test_turn_check_flags_a_turn_that_the_pushing_moment_opposes(tmp_path):
+    """On a push that turns the block, every window's turn is one friction can follow; with the contact point
+    mirrored through the COM (the pushing moment reversed, as a wrong contact point or COM would), windows in
+    which the block turns one way are flagged, and only those: friction would have to drive their turn."""
+    from dataclasses import replace
+
+    config = PushConfig(mu=0.42, mass_kg=0.6, offset_m=-0.02, yaw0_rad=-0.1, speed_m_s=0.03, stroke_s=5.0,
+                        push_s=2.9, seed=5)
+    write_push(tmp_path / "slow.mcap", config)
+    rec = read_recording(tmp_path / "slow.mcap")
+    sliding = SlidingConfig()
+    windows = push_windows(rec, _box(0.6), sliding, estimate_force_bias(rec, sliding))
+    check = turn_check(windows, _box(0.6), sliding)
+    turning = np.abs(check.turn_rad) > np.radians(1.0)
+    assert turning.sum() >= 4 and not check.drives_turn.any()
+    assert np.all(check.friction_nm[turning] * check.turn_rad[turning] < 0)
+    com = np.repeat(windows.measured[:-1, :, :2], windows.substeps, axis=0)
+    mirrored = turn_check(replace(windows, contact=2 * com - windows.contact), _box(0.6), sliding)
+    assert mirrored.drives_turn.sum() >= 4 and not (mirrored.drives_turn & ~turning).any()
 
 
 def test_push_without_contact_topic_names_the_file(tmp_path):
