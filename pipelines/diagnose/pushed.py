@@ -73,16 +73,17 @@ def _select(parts: list[PushWindows], picks) -> PushWindows:
     return concat_push_windows([take(parts[i], mask) for i, mask in picks if mask.any()])
 
 
-def _folds(parts: list[PushWindows], trials: int) -> list[_Fold]:
+def _folds(parts: list[PushWindows], trials: int) -> list[_Fold] | None:
     """The held-out recordings (indices from `trials` on) evaluate a fit on every trial; without them, the
-    first half of each trial's windows (in time) and the second half evaluate each other."""
+    first half of each trial's windows (in time) and the second half evaluate each other. None when the
+    trials hold a single window and there is no held-out recording: nothing can be held out."""
     if len(parts) > trials:
         everything = lambda idx: tuple((i, np.ones(parts[i].window_count, bool)) for i in idx)  # noqa: E731
         return [_Fold(everything(range(trials)), everything(range(trials, len(parts))))]
     first = tuple((i, np.arange(parts[i].window_count) < parts[i].window_count / 2) for i in range(trials))
     second = tuple((i, ~mask) for i, mask in first)
     if not any(m.any() for _, m in first) or not any(m.any() for _, m in second):
-        raise ValueError("diagnose: the trials hold a single push window; give --holdout to diagnose them")
+        return None
     return [_Fold(first, second), _Fold(second, first)]
 
 
@@ -110,6 +111,10 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     parts = [replace(w, t_start_s=w.t_start_s - r.pose.t_s[0])
              for r, b in zip(recordings, biases) for w in [push_windows(r, body, sconfig, b)]]
     folds = _folds(parts, len(trials))
+    testable = folds is not None
+    if not testable:  # one window, no held-out recording: its replay and residuals alone, no candidate tried
+        everything = tuple((i, np.ones(p.window_count, bool)) for i, p in enumerate(parts))
+        folds = [_Fold(everything, everything)]
 
     def fit(names: tuple, train) -> SlidingFit:
         return identify_sliding(_select(parts, train), body, sconfig, mu_prior=mu_prior, free=free, effects=names)
@@ -131,8 +136,8 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
         return np.concatenate([_window_mse(r.residual) for r in refits[names]])
 
     base = evaluate(())
-    passing = sorted((c for c in PUSHED_CANDIDATES if predicts_better(evaluate((c,)), base)),
-                     key=lambda c: evaluate((c,)).sum())
+    tried = PUSHED_CANDIDATES if testable else ()
+    passing = sorted((c for c in tried if predicts_better(evaluate((c,)), base)), key=lambda c: evaluate((c,)).sum())
     best: tuple = (passing[0],) if passing else ()
     if len(passing) >= 2:
         pair = tuple(c for c in PUSHED_CANDIDATES if c in passing[:2])
@@ -141,8 +146,7 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     scores = {"+".join(k) or "none": float(evaluate(k).mean()) for k in refits}
 
     # inclusion: the share of bootstrap resamples of the evaluation windows a candidate predicts better in
-    gains = {c: np.log(np.maximum(evaluate((c,)), 1e-300)) - np.log(np.maximum(base, 1e-300))
-             for c in PUSHED_CANDIDATES}
+    gains = {c: np.log(np.maximum(evaluate((c,)), 1e-300)) - np.log(np.maximum(base, 1e-300)) for c in tried}
     picks = rng.integers(0, len(base), (config.bootstraps, len(base)))
     inclusion = {c: float(np.mean(g[picks].mean(axis=1) < 0)) for c, g in gains.items()}
 
@@ -185,11 +189,14 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
               "residual_before": (series["before"]["residual"] / noise).tolist(),
               "residual_after": (series["after"]["residual"] / noise).tolist()}
     screening = Screening(inclusion, tuple(passing),
-                          {n: _effect_params(n, refits[(n,)][0].fit, trials[0])[0] for n in PUSHED_CANDIDATES},
+                          {n: _effect_params(n, refits[(n,)][0].fit, trials[0])[0] for n in tried},
                           config.bootstraps)
     diagnosis = Diagnosis(
         effects=tuple(effects), unexplained=left, screening=screening, scores=scores, fits=fits,
-        residuals=residuals, findings=tuple(describe(residuals["before"])), inertial={},
+        residuals=residuals, inertial={},
+        findings=(*(() if testable else ("a single push window and no held-out recording: no candidate effect can "
+                                         "be tested (give --holdout); the window's own replay is analysed",)),
+                  *describe(residuals["before"])),
         heldout=bool(holdouts), traces=traces,
     )
     return diagnosis, final
@@ -244,8 +251,10 @@ def _turns_against_friction(parts: list, names: np.ndarray, body, sconfig: Slidi
                            f"{np.degrees(check.turn_rad[w]):+.1f} deg while the pushing moment "
                            f"({check.pushing_nm[w]:+.4f} N m) and its angular momentum "
                            f"leave a friction moment of {check.friction_nm[w]:+.4f} N m that drives the turn: no "
-                           "friction coefficient explains it (the contact point, the force direction, the COM "
-                           "or the support pressure's symmetry is off)",
+                           "friction coefficient explains it at the prior's I_zz (the contact point, the force "
+                           "direction, the COM or the support pressure's symmetry is off"
+                           + (f", or I_zz is {ratio:.2f}x the prior's or {'more' if ratio > 1 else 'less'}"
+                              if np.isfinite(ratio := check.izz_balance_kgm2[w] / body.izz_kgm2) else "") + ")",
                 "where": {"t_s": [a, b]},
                 "share": float(np.sum(after["residual"][inside] ** 2) / energy) if energy > 0 else 0.0})
     return tuple(out)

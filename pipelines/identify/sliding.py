@@ -980,12 +980,15 @@ def _pushing_moment(windows: PushWindows) -> np.ndarray:
 @dataclass(frozen=True)
 class TurnCheck:
     """Result of `turn_check`, per window: the turn [rad], the pushing moment and the mean friction moment the
-    turn requires [N m], and whether friction would have to drive the turn (no mu explains the window)."""
+    turn requires [N m], whether friction would have to drive the turn (no mu explains the window at the
+    body's I_zz), and the I_zz at which the required friction moment is zero [kg m^2] (an I_zz beyond it, the
+    other way from the body's, would let friction oppose the turn; inf where none would)."""
 
     turn_rad: np.ndarray
     pushing_nm: np.ndarray
     friction_nm: np.ndarray
     drives_turn: np.ndarray
+    izz_balance_kgm2: np.ndarray
 
 
 def turn_check(windows: PushWindows, body: PlanarBody, config: SlidingConfig, margin: float = 0.1) -> TurnCheck:
@@ -1009,9 +1012,12 @@ def turn_check(windows: PushWindows, body: PlanarBody, config: SlidingConfig, ma
     cuts = np.linspace(0, len(yaw) - 1, 4).round().astype(int)
     one_way = np.all([np.sign(yaw[b] - yaw[a]) == np.sign(turn) for a, b in pairwise(cuts)], axis=0)
     pushing, size = _pushing_moment(windows)
-    friction = body.izz_kgm2 * (_end_twist(windows, config)[:, 2] - windows.start[:, 5]) / span_s - pushing
+    spin_up = (_end_twist(windows, config)[:, 2] - windows.start[:, 5]) / span_s
+    friction = body.izz_kgm2 * spin_up - pushing
     drives = one_way & (np.abs(turn) >= 10 * scatter) & (friction * np.sign(turn) > margin * size)
-    return TurnCheck(turn, pushing, friction, drives)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        balance = np.where(pushing / spin_up > 0, pushing / spin_up, np.inf)
+    return TurnCheck(turn, pushing, friction, drives, balance)
 
 
 def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig):

@@ -232,6 +232,13 @@ def test_turn_check_flags_a_turn_that_the_pushing_moment_opposes(tmp_path):
     com = np.repeat(windows.measured[:-1, :, :2], windows.substeps, axis=0)
     mirrored = turn_check(replace(windows, contact=2 * com - windows.contact), _box(0.6), sliding)
     assert mirrored.drives_turn.sum() >= 4 and not (mirrored.drives_turn & ~turning).any()
+    # past the I_zz that balances a flagged window, its friction moment opposes the turn again
+    for w in np.flatnonzero(mirrored.drives_turn):
+        ratio = mirrored.izz_balance_kgm2[w] / _box(0.6).izz_kgm2
+        if np.isfinite(ratio):
+            body = replace(_box(0.6), izz_kgm2=_box(0.6).izz_kgm2 * ratio * (1.05 if ratio > 1 else 0.95))
+            beyond = turn_check(replace(windows, contact=2 * com - windows.contact), body, sliding)
+            assert beyond.friction_nm[w] * beyond.turn_rad[w] < 0
 
 
 def test_push_without_contact_topic_names_the_file(tmp_path):
