@@ -177,7 +177,7 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
     """
     from pipelines.identify.sliding import (
         ForceBias, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
-        quasi_static_friction, replay_errors, wrench_balance_friction,
+        quasi_static_friction, replay_errors, turn_check, wrench_balance_friction,
     )
 
     known = tuple(b.folder for b in BLOCKS)
@@ -213,6 +213,7 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
             row = {
                 "sliding": fit.sliding_windows, "mu_wb": balance.mu if balance else float("nan"),
                 "wb_windows": len(balance.per_window) if balance else 0,
+                "against": int(turn_check(windows, body, config).drives_turn.sum()),
                 "block": block.folder, "trial": trial_dir.name, "mu": float(fit.theta[0]),
                 "mass": float(fit.theta[1]), "mu_m": float(fit.theta[0] * fit.theta[1]),
                 "determined": fit.determined, "windows": fit.window_count,
@@ -233,6 +234,7 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
         qs_drift = np.array([r["mu_qs_drift"] for r in per_block])
         wb = np.array([r["mu_wb"] for r in per_block if np.isfinite(r["mu_wb"])])
         summary.append({
+            "against": sum(r["against"] for r in per_block), "windows": sum(r["windows"] for r in per_block),
             "wb_trials": len(wb), "wb_mean": wb.mean() if len(wb) else float("nan"),
             "wb_cv_pct": 100 * wb.std(ddof=1) / wb.mean() if len(wb) > 1 else float("nan"),
             "block": block.folder, "trials": len(per_block), "mu_mean": mus.mean(),
@@ -264,7 +266,7 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
     print("per trial (mass from the prior's material density unless 'data' says the pushes determined it):")
     print(f"{'block':14} {'trial':20} {'mu':>6} {'m kg':>6} {'mu*m':>6} {'data':>4} {'win':>3} {'slid':>4} "
           f"{'mu wb':>6} {'st':>3} {'mu qs':>6} {'qs rest':>7} {'qs drift':>8} {'zeros':>5} {'drift N':>7} "
-          f"{'turn deg':>8} {'rmse mm':>7} {'rmse deg':>8} {'s':>5}")
+          f"{'turn deg':>8} {'against':>7} {'rmse mm':>7} {'rmse deg':>8} {'s':>5}")
     for r in trials:
         if "skipped" in r:
             print(f"{r['block']:14} {r['trial']:20} skipped: {r['skipped']}")
@@ -277,22 +279,24 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
               f"{r['windows']:3d} {r['sliding']:4d} {r['mu_wb']:6.3f} {r['wb_windows']:3d} "
               f"{r['mu_qs_prior_mass']:6.3f} {r['mu_qs_resting_zero']:7.3f} "
               f"{r['mu_qs_drift']:8.3f} {zeros:>5} "
-              f"{drift:7.3f} {r['turn_deg']:8.1f} {r['rmse_mm']:7.2f} {r['rmse_heading_deg']:8.2f} {r['seconds']:5.1f}")
+              f"{drift:7.3f} {r['turn_deg']:8.1f} {r['against']:7d} {r['rmse_mm']:7.2f} {r['rmse_heading_deg']:8.2f} "
+              f"{r['seconds']:5.1f}")
     print("slid: windows in which the fit's simulation slides (none: mu only bounded from below); mu wb: the "
-          "quasi-static wrench balance over its 'st' steady windows")
+          "quasi-static wrench balance over its 'st' steady windows; against: windows whose turn no mu explains at "
+          "the prior's I_zz (friction would have to drive it: turn_check)")
     print("zeros: how many force-offset zeros the fit used, 'a' with the pusher away, 'r' resting on the block before "
           "the push; qs rest: the quasi-static mu with the resting offset; qs drift: linear from that to the "
           "pusher-away zero after the push; drift N: their difference")
     print("\nper block:")
     print(f"{'block':14} {'trials':>6} {'prior m kg':>10} {'mu prior':>8} {'mu mean':>7} {'mu CV %':>7} "
           f"{'mu*m CV %':>9} {'wb trials':>9} {'wb mean':>7} {'wb CV %':>7} {'qs mean':>7} {'qs CV %':>7} "
-          f"{'qs rest mean':>12} {'qs rest CV %':>12} {'qs drift mean':>13} {'qs drift CV %':>13}")
+          f"{'qs rest mean':>12} {'qs rest CV %':>12} {'qs drift mean':>13} {'qs drift CV %':>13} {'against':>9}")
     for s in summary:
         print(f"{s['block']:14} {s['trials']:6d} {s['prior_mass']:10.3f} {s['mu_prior']:8.3f} {s['mu_mean']:7.3f} "
               f"{s['mu_cv_pct']:7.2f} {s['mu_m_cv_pct']:9.2f} {s['wb_trials']:9d} {s['wb_mean']:7.3f} "
               f"{s['wb_cv_pct']:7.2f} {s['qs_mean']:7.3f} {s['qs_cv_pct']:7.2f} "
               f"{s['qs_resting_mean']:12.3f} {s['qs_resting_cv_pct']:12.2f} {s['qs_drift_mean']:13.3f} "
-              f"{s['qs_drift_cv_pct']:13.2f}")
+              f"{s['qs_drift_cv_pct']:13.2f} {s['against']:>4d}/{s['windows']:<4d}")
     print("\npredictive validity: fitted on odd-numbered trials, predicting the others "
           f"({config.window_s} s windows from measured states, measured force and contact):")
     print(f"{'block':14} {'trial':20} {'mu fit':>6} {'pos mm':>7} {'prior mm':>8} {'head deg':>8} {'prior deg':>9}")
