@@ -262,8 +262,10 @@ def _sliding_result(pushed, refit, diagnosis, body, prior):
     """Theta, fit metrics, provenance, loss curve and traces of a pushed object.
 
     What the pushes leave undetermined keeps the prior's value and is marked "prior"; COM and the
-    tilting moments always are. With effects chosen by the diagnosis, its refit (mu and I_zz fitted with
-    them) replaces the identification's, whose estimate lacked them, as for a free body.
+    tilting moments always are, and so is I_zz where some window turns against its pushing moment (the
+    fit's I_zz then stands in for what turns the object; `PushedIdentification.izz_measured`). With
+    effects chosen by the diagnosis, its refit (mu and I_zz fitted with them) replaces the
+    identification's, whose estimate lacked them, as for a free body.
     """
     from dataclasses import asdict
 
@@ -274,7 +276,7 @@ def _sliding_result(pushed, refit, diagnosis, body, prior):
     mass0 = float(prior.inertial.mass)
     (_, mass, izz), (_, mass_std, izz_std) = fit.theta, fit.std
     friction, friction_from = _sliding_friction(fit, pushed.balance, prior)
-    _, mass_known, izz_known = fit.determined
+    mass_known, izz_known = fit.determined[1], fit.determined[2] and pushed.izz_measured
     # one tensor scale keeps it physically consistent: Izz's if the pushes determined it, else the mass's
     scale = izz / inertia0[2, 2] if izz_known else (mass / mass0 if mass_known else 1.0)
     inertia = inertia0 * scale
@@ -282,7 +284,8 @@ def _sliding_result(pushed, refit, diagnosis, body, prior):
         mass=Estimate(float(mass) if mass_known else mass0, float(mass_std),
                       source="measured" if mass_known else "prior", prior=prior.provenance()),
         com=Estimate(tuple(prior.inertial.com), (0.0, 0.0, 0.0), source="prior"),
-        inertia=Estimate(tuple(map(tuple, inertia)), tuple(map(tuple, np.abs(inertia) * (izz_std / izz))),
+        inertia=Estimate(tuple(map(tuple, inertia)),
+                         tuple(map(tuple, np.abs(inertia) * (izz_std / izz if izz_known else body.izz_rel_std))),
                          source="measured" if izz_known else "prior"),
         friction=friction,
     )

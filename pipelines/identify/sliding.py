@@ -1072,7 +1072,10 @@ class PushedIdentification:
     held-out recording when there is one, else on the trials; traces: the replay for the report
     (positions and headings);
     balance: the quasi-static wrench balance on the trials (None without a steady window), the
-    measurement of mu where the fit's simulation sticks throughout (a slow push).
+    measurement of mu where the fit's simulation sticks throughout (a slow push); turns: `turn_check` of
+    the trials' windows. Where some window turns against its pushing moment, the turning has a cause the
+    model lacks, and the I_zz the fit needs to follow it is a stand-in for that cause, not the body's
+    inertia (`izz_measured`).
     """
 
     fit: SlidingFit
@@ -1083,14 +1086,24 @@ class PushedIdentification:
     traces: dict
     config: SlidingConfig
     balance: WrenchBalance | None = None
+    turns: TurnCheck | None = None
+
+    @property
+    def izz_measured(self) -> bool:
+        """Whether the pushes measured I_zz: the fit determined it and no window turns against its push."""
+        return bool(self.fit.determined[2] and (self.turns is None or not self.turns.drives_turn.any()))
 
     def provenance(self) -> dict:
         from dataclasses import asdict
 
+        turns = None if self.turns is None else {
+            "windows_against": int(self.turns.drives_turn.sum()), "windows": len(self.turns.drives_turn),
+            "izz_balance_kgm2": [float(v) for v in self.turns.izz_balance_kgm2[self.turns.drives_turn]],
+            "izz_fitted_kgm2": float(self.fit.theta[2]), "izz_measured": self.izz_measured}
         return {"kind": "sliding", **self.fit.provenance(), "prior_theta": list(map(float, self.prior_theta)),
                 "force_bias_world": [b.provenance() for b in self.biases],
                 "wrench_balance": self.balance.provenance() if self.balance else None,
-                "config": asdict(self.config)}
+                "turn_check": turns, "config": asdict(self.config)}
 
 
 def identify_pushed(trials, holdout, body: PlanarBody, mu_prior: float, config: SlidingConfig,
@@ -1125,4 +1138,4 @@ def identify_pushed(trials, holdout, body: PlanarBody, mu_prior: float, config: 
               **{f"{k}_position": xyz(a) for k, a in (("measured", check.measured), *paths.items())},
               **{f"{k}_heading_rad": a[..., 2].ravel() for k, a in (("measured", check.measured), *paths.items())}}
     return PushedIdentification(fit, prior_theta, biases, metrics["baseline"], metrics["final"], traces, config,
-                                balance)
+                                balance, turn_check(windows, body, config))

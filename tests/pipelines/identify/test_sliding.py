@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pipelines.identify.sliding import (
-    PlanarBody, PushWindows, SlidingConfig, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
+    PlanarBody, PushedIdentification, PushWindows, SlidingConfig, TurnCheck, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
     sliding_windows, steady_windows, turn_check, wrench_balance_error, wrench_balance_friction,
 )
 from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack, read_recording
@@ -239,6 +239,25 @@ def test_turn_check_flags_a_turn_that_the_pushing_moment_opposes(tmp_path):
             body = replace(_box(0.6), izz_kgm2=_box(0.6).izz_kgm2 * ratio * (1.05 if ratio > 1 else 0.95))
             beyond = turn_check(replace(windows, contact=2 * com - windows.contact), body, sliding)
             assert beyond.friction_nm[w] * beyond.turn_rad[w] < 0
+
+
+def test_izz_is_not_measured_where_a_window_turns_against_its_push():
+    """A fit that determined I_zz measured it only if every window's turn is one its pushing moment can give."""
+    from types import SimpleNamespace
+
+    fit = SimpleNamespace(determined=(True, False, True), theta=np.array([0.3, 0.7, 4e-3]), provenance=dict)
+
+    def pushed(against):
+        turns = TurnCheck(np.full(3, 0.05), np.full(3, -0.005), np.full(3, 0.006), np.array(against),
+                          np.full(3, np.inf))
+        return PushedIdentification(fit, np.array([0.4, 0.7, 1e-3]), [], (0, 0, 0), (0, 0, 0), {}, SlidingConfig(),
+                                    None, turns)
+
+    assert pushed([False, False, False]).izz_measured
+    flagged = pushed([False, True, False])
+    assert not flagged.izz_measured
+    assert flagged.provenance()["turn_check"] == {"windows_against": 1, "windows": 3, "izz_balance_kgm2": [np.inf],
+                                                  "izz_fitted_kgm2": 4e-3, "izz_measured": False}
 
 
 def test_push_without_contact_topic_names_the_file(tmp_path):
