@@ -237,24 +237,32 @@ def _metrics(refits: list[_Refit], length: float) -> FitMetrics:
 
 def _turns_against_friction(parts: list, names: np.ndarray, body, sconfig: SlidingConfig, after: dict) -> tuple:
     """DESIGN.md `unexplained` entries for the windows whose turn no friction coefficient explains (`turn_check`),
-    with the share of the chosen model's evaluation residual in them."""
+    consecutive windows of a recording as one stretch, with the share of the chosen model's evaluation residual
+    in it."""
+    def span(values: np.ndarray, fmt: str) -> str:
+        return f"{values.min():{fmt}} to {values.max():{fmt}}" if len(values) > 1 else f"{values[0]:{fmt}}"
+
     energy = float(np.sum(after["residual"] ** 2))
     span_s = parts[0].sample_count * sconfig.sample_period_s
     out = []
     for index, (part, name) in enumerate(zip(parts, names)):
         check = turn_check(part, body, sconfig)
-        for w in np.flatnonzero(check.drives_turn):
-            a, b = float(part.t_start_s[w]), float(part.t_start_s[w] + span_s)
+        flagged = np.flatnonzero(check.drives_turn)
+        runs = np.split(flagged, np.flatnonzero(np.diff(part.t_start_s[flagged]) > 1.5 * span_s) + 1)
+        for run in (r for r in runs if len(r)):
+            a, b = float(part.t_start_s[run[0]]), float(part.t_start_s[run[-1]] + span_s)
             inside = (after["recording"] == index) & (after["t_s"] > a) & (after["t_s"] <= b)
+            turn, pushing, friction = (np.degrees(check.turn_rad[run]), check.pushing_nm[run], check.friction_nm[run])
+            ratio = check.izz_balance_kgm2[run] / body.izz_kgm2
+            izz = ("" if not np.all(np.isfinite(ratio)) or len({bool(r > 1) for r in ratio}) > 1 else
+                   f", or I_zz is {ratio.max() if ratio[0] > 1 else ratio.min():.2f}x the prior's or "
+                   f"{'more' if ratio[0] > 1 else 'less'}")
             out.append({
-                "summary": f"t = {a:.2f}-{b:.2f} s of {name}: the object turns "
-                           f"{np.degrees(check.turn_rad[w]):+.1f} deg while the pushing moment "
-                           f"({check.pushing_nm[w]:+.4f} N m) and its angular momentum "
-                           f"leave a friction moment of {check.friction_nm[w]:+.4f} N m that drives the turn: no "
-                           "friction coefficient explains it at the prior's I_zz (the contact point, the force "
-                           "direction, the COM or the support pressure's symmetry is off"
-                           + (f", or I_zz is {ratio:.2f}x the prior's or {'more' if ratio > 1 else 'less'}"
-                              if np.isfinite(ratio := check.izz_balance_kgm2[w] / body.izz_kgm2) else "") + ")",
+                "summary": f"t = {a:.2f}-{b:.2f} s of {name}: in {len(run)} window(s) the object turns "
+                           f"{span(turn, '+.1f')} deg while the pushing moment ({span(pushing, '+.4f')} N m) and "
+                           f"its angular momentum leave a friction moment ({span(friction, '+.4f')} N m) that drives "
+                           "the turn: no friction coefficient explains it at the prior's I_zz (the contact point, "
+                           f"the force direction, the COM or the support pressure's symmetry is off{izz})",
                 "where": {"t_s": [a, b]},
                 "share": float(np.sum(after["residual"][inside] ** 2) / energy) if energy > 0 else 0.0})
     return tuple(out)

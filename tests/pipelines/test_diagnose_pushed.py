@@ -118,5 +118,5 @@ def test_real_corner_push_whose_turn_no_friction_explains():
     assert diagnosis.effects == () and refit is None
     assert diagnosis.findings[0].startswith("a single push window and no held-out recording")
     turn = [u for u in diagnosis.unexplained if "drives the turn" in u["summary"]]
-    assert len(turn) == 1 and "turns -18.7 deg" in turn[0]["summary"]
+    assert len(turn) == 1 and "in 1 window(s) the object turns -18.7 deg" in turn[0]["summary"]
     assert "or I_zz is 1.7" in turn[0]["summary"] and turn[0]["share"] == pytest.approx(1.0)
