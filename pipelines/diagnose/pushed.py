@@ -41,7 +41,7 @@ from .residuals import analyse_planar_residual, describe, unexplained
 from .screening import Screening
 from .select import DiagnoseConfig, Diagnosis, predicts_better
 
-PUSHED_CANDIDATES = ("sensor_bias", "viscous_damping", "time_delay")
+PUSHED_CANDIDATES = ("sensor_bias", "viscous_damping", "time_delay", "contact_offset")
 """Candidates of the sliding kind, in the order they are tried."""
 
 
@@ -157,7 +157,7 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
         params, evidence = _effect_params(name, final, trials[0])
         effects.append(Effect(name, params, {
             **evidence, "inclusion_probability": inclusion[name],
-            "belongs": "recording" if name in ("sensor_bias", "time_delay") else "object",
+            "belongs": "recording" if name in ("sensor_bias", "time_delay", "contact_offset") else "object",
             "heldout_mse_m2": {"none": scores["none"], name: scores[name], "chosen": scores["+".join(best)]},
         }))
 
@@ -179,7 +179,9 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     t_after = series["after"]["t_s"]
     left = (*unexplained(residuals["after"], config.unexplained_share, (t_after.min(), t_after.max()),
                          series["after"]["residual"]),
-            *_turns_against_friction(parts, names, body, sconfig, series["after"]))
+            *_turns_against_friction(parts, names, body, sconfig, series["after"],
+                                     final.effect[list(EFFECT_SLOTS["contact_offset"])]
+                                     if "contact_offset" in best else np.zeros(2)))
     traces = {"t_s": series["before"]["t_s"].tolist(),
               "measured_position": series["before"]["measured"].tolist(),
               "before_position": (series["before"]["measured"] + series["before"]["position_error"]).tolist(),
@@ -208,6 +210,9 @@ def _effect_params(name: str, fit: SlidingFit, recording) -> tuple[dict, dict]:
         (k,) = EFFECT_SLOTS[name]
         return {"seconds": float(fit.effect[k])}, {"std": {"seconds": float(fit.effect_std[k])}}
     x, y = EFFECT_SLOTS[name]
+    if name == "contact_offset":  # not in DESIGN.md's vocabulary: the force acts at the measured point plus it
+        return ({"offset_m": [float(fit.effect[x]), float(fit.effect[y]), 0.0]},
+                {"frame": "world", "std_m": [float(fit.effect_std[x]), float(fit.effect_std[y])]})
     if name == "viscous_damping":
         return ({"b": float(fit.effect[x]), "b_angular": float(fit.effect[y])},
                 {"std": {"b": float(fit.effect_std[x]), "b_angular": float(fit.effect_std[y])}})
@@ -235,10 +240,11 @@ def _metrics(refits: list[_Refit], length: float) -> FitMetrics:
                       loss=float(np.mean(np.sum(r**2, -1))))
 
 
-def _turns_against_friction(parts: list, names: np.ndarray, body, sconfig: SlidingConfig, after: dict) -> tuple:
-    """DESIGN.md `unexplained` entries for the windows whose turn no friction coefficient explains (`turn_check`),
-    consecutive windows of a recording as one stretch, with the share of the chosen model's evaluation residual
-    in it."""
+def _turns_against_friction(parts: list, names: np.ndarray, body, sconfig: SlidingConfig, after: dict,
+                            contact_offset_m: np.ndarray) -> tuple:
+    """DESIGN.md `unexplained` entries for the windows whose turn no friction coefficient explains (`turn_check`,
+    with the chosen model's contact offset, world x, y [m]), consecutive windows of a recording as one stretch,
+    with the share of the chosen model's evaluation residual in it."""
     def span(values: np.ndarray, fmt: str) -> str:
         return f"{values.min():{fmt}} to {values.max():{fmt}}" if len(values) > 1 else f"{values[0]:{fmt}}"
 
@@ -246,7 +252,7 @@ def _turns_against_friction(parts: list, names: np.ndarray, body, sconfig: Slidi
     span_s = parts[0].sample_count * sconfig.sample_period_s
     out = []
     for index, (part, name) in enumerate(zip(parts, names)):
-        check = turn_check(part, body, sconfig)
+        check = turn_check(replace(part, contact=part.contact + contact_offset_m), body, sconfig)
         flagged = np.flatnonzero(check.drives_turn)
         runs = np.split(flagged, np.flatnonzero(np.diff(part.t_start_s[flagged]) > 1.5 * span_s) + 1)
         for run in (r for r in runs if len(r)):

@@ -453,6 +453,8 @@ def apply_pusher_force(
     would rock the box on its contacts); the planar motion needs the in-plane moment.
     effect[4] is the wrench's delay d [s] (DESIGN.md time_delay: stamped t, it acted at t - d), so
     the force acting now was read d later: interpolated between steps, so d has a gradient.
+    effect[5:7] is the contact point's offset [m], world x, y: the force acts at the measured point plus it
+    (a probe or tracker calibration off by millimetres moves the pushing moment of a near-central push).
     """
     w = wp.tid()
     X = body_q[w]
@@ -461,15 +463,15 @@ def apply_pusher_force(
     i = wp.clamp(int(wp.floor(at)), 0, force.shape[0] - 2)
     a = wp.clamp(at - float(i), 0.0, 1.0)
     f2 = force[i, w] * (1.0 - a) + force[i + 1, w] * a
-    p2 = contact[step, w]
+    p2 = contact[step, w] + wp.vec2(effect[5], effect[6])
     f = wp.vec3(f2[0], f2[1], 0.0)
     arm = wp.vec3(p2[0] - c[0], p2[1] - c[1], 0.0)
     body_f[w] = wp.spatial_vector(f, wp.cross(arm, f))
 
 
-EFFECT_SLOTS = {"sensor_bias": (0, 1), "viscous_damping": (2, 3), "time_delay": (4,)}
+EFFECT_SLOTS = {"sensor_bias": (0, 1), "viscous_damping": (2, 3), "time_delay": (4,), "contact_offset": (5, 6)}
 """Where each effect's parameters sit in the rollout's effect vector (apply_sliding_effects, apply_pusher_force)."""
-EFFECT_SIZE = 5
+EFFECT_SIZE = 7
 
 
 @wp.kernel
@@ -726,14 +728,16 @@ def replay_errors(rollout: SlidingRollout, theta, correction=None, effect=None) 
     )
 
 
-_EFFECT_SCALE = np.array([0.05, 0.05, 0.5, 1e-3, 0.005])
-"""Typical sizes of the effect slots (force offset [N], drag [N s/m], turning drag [N m s], delay [s]):
-the optimiser's units."""
+_EFFECT_SCALE = np.array([0.05, 0.05, 0.5, 1e-3, 0.005, 0.002, 0.002])
+"""Typical sizes of the effect slots (force offset [N], drag [N s/m], turning drag [N m s], delay [s],
+contact offset [m]): the optimiser's units."""
 
 
 def _effect_bounds(config: SlidingConfig) -> tuple:
-    """Drag is passive (it only takes energy out); a delay stays within the force kept beyond the windows."""
-    return (-5.0, 5.0), (-5.0, 5.0), (0.0, 50.0), (0.0, 0.5), (-config.max_delay_s, config.max_delay_s)
+    """Drag is passive (it only takes energy out); a delay stays within the force kept beyond the windows; a
+    contact offset within 2 cm (a calibration, not a different contact)."""
+    return ((-5.0, 5.0), (-5.0, 5.0), (0.0, 50.0), (0.0, 0.5), (-config.max_delay_s, config.max_delay_s),
+            (-0.02, 0.02), (-0.02, 0.02))
 
 
 def identify_sliding(

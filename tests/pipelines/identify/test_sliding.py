@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from pipelines.identify.sliding import (
-    PlanarBody, PushedIdentification, PushWindows, SlidingConfig, TurnCheck, SlidingRollout, estimate_force_bias, identify_sliding, push_windows,
-    sliding_windows, steady_windows, turn_check, wrench_balance_error, wrench_balance_friction,
+    PlanarBody, PushedIdentification, PushWindows, SlidingConfig, SlidingRollout, TurnCheck, estimate_force_bias,
+    identify_sliding, push_windows, sliding_windows, steady_windows, turn_check, wrench_balance_error,
+    wrench_balance_friction,
 )
 from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack, read_recording
 from pipelines.synth.push import PushConfig, write_push
@@ -78,22 +79,23 @@ def test_grad_mu_mass_izz_matches_central_difference():
 
 def test_grad_of_force_offset_drag_and_delay_matches_central_difference():
     """The tape's gradient w.r.t. the effect vector (force offset x, y [N], drag [N s/m], turning drag
-    [N m s], delay [s]) agrees with central differences, away from zero where the drag's sign matters;
-    the force ramps, so that a delay changes it, and is kept 10 steps beyond the windows."""
+    [N m s], delay [s], contact offset x, y [m]) agrees with central differences, away from zero where the
+    drag's sign matters; the force ramps, so that a delay changes it, and is kept 10 steps beyond the windows."""
     base = _windows(3.0, 0.15)
     margin = 10
     ramp = np.linspace(1.0, 5.0, base.step_count + 2 * margin)
     force = np.zeros((len(ramp), base.window_count, 2))
     force[..., 0] = ramp[:, None]
+    force[..., 1] = 0.3 * ramp[:, None]  # a force along x alone has no moment arm along x
     windows = PushWindows(base.dt_s, base.substeps, base.t_start_s, base.start, force, base.contact, base.measured,
                           margin)
     rollout = SlidingRollout(windows, _box(0.8), SlidingConfig())
     theta = np.array([0.35, 0.8, 0.0015])
-    effect = np.array([0.1, -0.05, 0.5, 1e-3, 0.005])
+    effect = np.array([0.1, -0.05, 0.5, 1e-3, 0.005, 0.003, -0.002])
     _, _, _, grad = rollout.loss_and_grad(theta, None, effect)
-    assert abs(grad[4]) > 0
-    for i, h in enumerate((0.02, 0.02, 0.1, 2e-4, 1e-3)):
-        e = np.zeros(5)
+    assert abs(grad[4]) > 0 and abs(grad[5]) > 0 and abs(grad[6]) > 0
+    for i, h in enumerate((0.02, 0.02, 0.1, 2e-4, 1e-3, 5e-4, 5e-4)):
+        e = np.zeros(7)
         e[i] = h
         plus = np.sum(rollout.residuals(theta, None, effect + e) ** 2)
         minus = np.sum(rollout.residuals(theta, None, effect - e) ** 2)
