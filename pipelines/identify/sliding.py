@@ -20,6 +20,9 @@ force (a little below mu m g the object sticks, a little above it runs away):
 a fit whose simulation sticks in every window has only bounded mu
 (`sliding_windows`), and the wrench balance of the windows in which the object
 slides throughout measures it without a simulation (`wrench_balance_friction`).
+A window whose turn its pushing moment cannot give (friction would have to drive
+it: `turn_check`) is a mismatch no coefficient explains, and the I_zz a fit needs
+to follow it is not the body's.
 
 Parameters are theta = (mu, m [kg], I_zz [kg m^2]). Pushes that are nearly
 quasi-static determine mu * m (force balance) better than either alone; a
@@ -973,7 +976,7 @@ def wrench_balance_error(windows: PushWindows, body: PlanarBody, config: Sliding
     return float(np.sqrt(np.mean((y - mu * X) ** 2)))
 
 
-def _pushing_moment(windows: PushWindows) -> np.ndarray:
+def _pushing_moment(windows: PushWindows) -> tuple[np.ndarray, np.ndarray]:
     """Per window, the mean moment of the pushing force about the measured COM [N m], and the mean of its size."""
     com = np.repeat(windows.measured[:-1, :, :2], windows.substeps, axis=0)
     arm, f = windows.contact - com, windows.window_force
@@ -1001,11 +1004,11 @@ def turn_check(windows: PushWindows, body: PlanarBody, config: SlidingConfig, ma
     Over a window the friction moment about the COM is the change of angular momentum less the pushing moment.
     Coulomb friction under a pressure symmetric about the COM opposes the turn at every instant (the unit-slip
     map is monotone: the friction moments of the points r and -r sum against the rotation), so in a window in
-    which the object turns one way (90 % of its pose steps) and the required friction moment has the turn's
-    sign, by more than `margin` of the mean pushing moment's size, no mu explains it: the pushing moment's
-    arm (contact point, force direction), the COM or the pressure's symmetry is off. "Turns one way": each
-    third of the window turns the way the whole does, which turns ten times the heading's scatter about a
-    quadratic in time (an object that does not turn can hold any moment below its friction's).
+    which the object turns one way and the required friction moment has the turn's sign, by more than `margin`
+    of the mean pushing moment's size, no mu explains it: the pushing moment's arm (contact point, force
+    direction), the COM or the pressure's symmetry is off. "Turns one way": each third of the window turns the
+    way the whole does, which turns ten times the heading's scatter about a quadratic in time (an object that
+    does not turn can hold any moment below its friction's).
     """
     span_s = windows.sample_count * windows.dt_s * windows.substeps
     yaw = windows.measured[..., 2]
