@@ -263,7 +263,7 @@ def _sliding_result(pushed, refit, diagnosis, body, prior):
 
     What the pushes leave undetermined keeps the prior's value and is marked "prior"; COM and the
     tilting moments always are, and so is I_zz where some window turns against its pushing moment (the
-    fit's I_zz then stands in for what turns the object; `PushedIdentification.izz_measured`). With
+    fit's I_zz then stands in for what turns the object; `PushedIdentification.turns_explained`). With
     effects chosen by the diagnosis, its refit (mu and I_zz fitted with them) replaces the
     identification's, whose estimate lacked them, as for a free body.
     """
@@ -276,7 +276,7 @@ def _sliding_result(pushed, refit, diagnosis, body, prior):
     mass0 = float(prior.inertial.mass)
     (_, mass, izz), (_, mass_std, izz_std) = fit.theta, fit.std
     friction, friction_from = _sliding_friction(fit, pushed.balance, prior)
-    mass_known, izz_known = fit.determined[1], fit.determined[2] and pushed.izz_measured
+    mass_known, izz_known = fit.determined[1], fit.determined[2] and pushed.turns_explained
     # one tensor scale keeps it physically consistent: Izz's if the pushes determined it, else the mass's
     scale = izz / inertia0[2, 2] if izz_known else (mass / mass0 if mass_known else 1.0)
     inertia = inertia0 * scale

@@ -249,11 +249,11 @@ def _turns_against_friction(parts: list, names: np.ndarray, body, sconfig: Slidi
         return f"{values.min():{fmt}} to {values.max():{fmt}}" if len(values) > 1 else f"{values[0]:{fmt}}"
 
     energy = float(np.sum(after["residual"] ** 2))
-    span_s = parts[0].sample_count * sconfig.sample_period_s
     out = []
     for index, (part, name) in enumerate(zip(parts, names)):
         check = turn_check(replace(part, contact=part.contact + contact_offset_m), body, sconfig)
         flagged = np.flatnonzero(check.drives_turn)
+        span_s = part.sample_count * sconfig.sample_period_s  # the clock `_series` times the samples by
         runs = np.split(flagged, np.flatnonzero(np.diff(part.t_start_s[flagged]) > 1.5 * span_s) + 1)
         for run in (r for r in runs if len(r)):
             a, b = float(part.t_start_s[run[0]]), float(part.t_start_s[run[-1]] + span_s)

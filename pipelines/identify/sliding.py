@@ -184,6 +184,15 @@ class PushWindows:
     def sample_count(self) -> int:
         return self.measured.shape[0] - 1
 
+    @property
+    def sample_period_s(self) -> float:
+        return self.dt_s * self.substeps
+
+    @property
+    def span_s(self) -> float:
+        """A window's length [s]."""
+        return self.sample_count * self.sample_period_s
+
 
 def _planar_grid(recording, config: "SlidingConfig", smooth: bool):
     """Pose track on a uniform grid of config.sample_period_s: t [s], xy [m], yaw [rad, unwrapped].
@@ -219,6 +228,20 @@ def _support_points(body: PlanarBody) -> np.ndarray:
     hx, hy, _ = body.half_extents_m
     cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0
     return np.array([(gx * hx, gy * hy) for gx in cells for gy in cells])
+
+
+def _scatter_about_quadratic(track: np.ndarray) -> np.ndarray:
+    """RMS of a window track [S+1, W, ...] about a quadratic in time fitted per window and channel, per
+    window: the tracker's scatter, the motion taken out."""
+    flat = track.reshape(track.shape[0], -1)
+    samples = np.arange(track.shape[0])
+    fit = np.polynomial.polynomial.polyval(samples, np.polynomial.polynomial.polyfit(samples, flat, 2)).T
+    return np.sqrt(np.mean(((flat - fit) ** 2).reshape(track.shape[0], track.shape[1], -1), axis=(0, 2)))
+
+
+def _thirds(samples: int) -> list[tuple[int, int]]:
+    """First and last sample of each third of a window of `samples` samples."""
+    return list(pairwise(np.linspace(0, samples - 1, 4).round().astype(int)))
 
 
 def _planar_travel(step: np.ndarray, arc_m: float) -> np.ndarray:
@@ -711,7 +734,7 @@ def sliding_windows(rollout: SlidingRollout, theta, correction=None, effect=None
     simulated = rollout.trajectories(theta, correction, effect)
     measured = rollout.windows.measured
     half = measured.shape[0] // 2
-    span_s = (measured.shape[0] - 1 - half) * rollout.windows.dt_s * rollout.windows.substeps
+    span_s = (measured.shape[0] - 1 - half) * rollout.windows.sample_period_s
 
     def travel(track):
         return _planar_travel(track[-1] - track[half], rollout.yaw_length_m)
@@ -912,15 +935,11 @@ def steady_windows(windows: PushWindows, body: PlanarBody, config: SlidingConfig
     travel over each third, and at its start and end at least half its mean speed (travel: x, y and the
     heading as an arc at the face's half diagonal)."""
     m = windows.measured
-    samples = np.arange(m.shape[0])
-    xy = m[..., :2].reshape(m.shape[0], -1)
-    fit = np.polynomial.polynomial.polyval(samples, np.polynomial.polynomial.polyfit(samples, xy, 2)).T
-    scatter = np.sqrt(np.mean(((xy - fit) ** 2).reshape(m.shape[0], -1, 2), axis=(0, 2)))
+    scatter = _scatter_about_quadratic(m[..., :2])
     arc = float(np.hypot(*body.half_extents_m[:2]))
-    span_s = windows.sample_count * windows.dt_s * windows.substeps
-    cuts = np.linspace(0, m.shape[0] - 1, 4).round().astype(int)
+    span_s = windows.span_s
     whole = _planar_travel(m[-1] - m[0], arc)
-    thirds = np.all([_planar_travel(m[b] - m[a], arc) >= whole / 6 for a, b in pairwise(cuts)], axis=0)
+    thirds = np.all([_planar_travel(m[b] - m[a], arc) >= whole / 6 for a, b in _thirds(m.shape[0])], axis=0)
     start, end = windows.start[:, 3:6], _end_twist(windows, config)
     mean_speed = whole / span_s
     return ((whole >= np.maximum(config.moving_speed_m_s * span_s, 10.0 * scatter)) & thirds
@@ -931,7 +950,7 @@ def _end_twist(windows: PushWindows, config: SlidingConfig) -> np.ndarray:
     """x, y rates [m/s] and yaw rate [rad/s] at each window's end [W, 3], by the quadratic fit that gives its
     start's (`local_twist`), one-sided over as many samples as the start's centred one."""
     S = windows.sample_count
-    t = np.arange(S + 1) * windows.dt_s * windows.substeps
+    t = np.arange(S + 1) * windows.sample_period_s
     out = []
     for m in np.moveaxis(windows.measured, 1, 0):
         rot = Rotation.from_rotvec(np.c_[np.zeros((S + 1, 2)), m[:, 2]])
@@ -1010,16 +1029,12 @@ def turn_check(windows: PushWindows, body: PlanarBody, config: SlidingConfig, ma
     way the whole does, which turns ten times the heading's scatter about a quadratic in time (an object that
     does not turn can hold any moment below its friction's).
     """
-    span_s = windows.sample_count * windows.dt_s * windows.substeps
     yaw = windows.measured[..., 2]
     turn = yaw[-1] - yaw[0]
-    samples = np.arange(len(yaw))
-    fit = np.polynomial.polynomial.polyval(samples, np.polynomial.polynomial.polyfit(samples, yaw, 2)).T
-    scatter = np.sqrt(np.mean((yaw - fit) ** 2, axis=0))
-    cuts = np.linspace(0, len(yaw) - 1, 4).round().astype(int)
-    one_way = np.all([np.sign(yaw[b] - yaw[a]) == np.sign(turn) for a, b in pairwise(cuts)], axis=0)
+    scatter = _scatter_about_quadratic(yaw)
+    one_way = np.all([np.sign(yaw[b] - yaw[a]) == np.sign(turn) for a, b in _thirds(len(yaw))], axis=0)
     pushing, size = _pushing_moment(windows)
-    spin_up = (_end_twist(windows, config)[:, 2] - windows.start[:, 5]) / span_s
+    spin_up = (_end_twist(windows, config)[:, 2] - windows.start[:, 5]) / windows.span_s
     friction = body.izz_kgm2 * spin_up - pushing
     drives = one_way & (np.abs(turn) >= 10 * scatter) & (friction * np.sign(turn) > margin * size)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -1030,12 +1045,11 @@ def turn_check(windows: PushWindows, body: PlanarBody, config: SlidingConfig, ma
 def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig):
     """Per steady window, the friction wrench per unit mu (X) and the momentum change less the pushing wrench
     (y), world x, y [N] and the moment over the face's half diagonal [N]; None without a steady window."""
-    period = windows.dt_s * windows.substeps
     hx, hy, _ = body.half_extents_m
     grid = _support_points(body)
     normal_n = body.mass_kg * GRAVITY_M_S2 / len(grid)
     lever_m = float(np.hypot(hx, hy))
-    span_s = windows.sample_count * period
+    span_s = windows.span_s
     steady = np.flatnonzero(steady_windows(windows, body, config))
     if not len(steady):
         return None
@@ -1081,8 +1095,8 @@ class PushedIdentification:
     balance: the quasi-static wrench balance on the trials (None without a steady window), the
     measurement of mu where the fit's simulation sticks throughout (a slow push); turns: `turn_check` of
     the trials' windows. Where some window turns against its pushing moment, the turning has a cause the
-    model lacks, and the I_zz the fit needs to follow it is a stand-in for that cause, not the body's
-    inertia (`izz_measured`).
+    model lacks, and the I_zz a fit needs to follow it is a stand-in for that cause, not the body's
+    inertia (`turns_explained`).
     """
 
     fit: SlidingFit
@@ -1096,9 +1110,9 @@ class PushedIdentification:
     turns: TurnCheck | None = None
 
     @property
-    def izz_measured(self) -> bool:
-        """Whether the pushes measured I_zz: the fit determined it and no window turns against its push."""
-        return bool(self.fit.determined[2] and (self.turns is None or not self.turns.drives_turn.any()))
+    def turns_explained(self) -> bool:
+        """Whether every window's turn is one its pushing moment can give: only then can a fit measure I_zz."""
+        return self.turns is None or not bool(self.turns.drives_turn.any())
 
     def provenance(self) -> dict:
         from dataclasses import asdict
@@ -1106,7 +1120,7 @@ class PushedIdentification:
         turns = None if self.turns is None else {
             "windows_against": int(self.turns.drives_turn.sum()), "windows": len(self.turns.drives_turn),
             "izz_balance_kgm2": [float(v) for v in self.turns.izz_balance_kgm2[self.turns.drives_turn]],
-            "izz_fitted_kgm2": float(self.fit.theta[2]), "izz_measured": self.izz_measured}
+            "izz_fitted_kgm2": float(self.fit.theta[2]), "turns_explained": self.turns_explained}
         return {"kind": "sliding", **self.fit.provenance(), "prior_theta": list(map(float, self.prior_theta)),
                 "force_bias_world": [b.provenance() for b in self.biases],
                 "wrench_balance": self.balance.provenance() if self.balance else None,

@@ -243,8 +243,8 @@ def test_turn_check_flags_a_turn_that_the_pushing_moment_opposes(tmp_path):
             assert beyond.friction_nm[w] * beyond.turn_rad[w] < 0
 
 
-def test_izz_is_not_measured_where_a_window_turns_against_its_push():
-    """A fit that determined I_zz measured it only if every window's turn is one its pushing moment can give."""
+def test_turns_explained_only_where_no_window_turns_against_its_push():
+    """The pushes can measure I_zz only if every window's turn is one its pushing moment can give."""
     from types import SimpleNamespace
 
     fit = SimpleNamespace(determined=(True, False, True), theta=np.array([0.3, 0.7, 4e-3]), provenance=dict)
@@ -255,11 +255,11 @@ def test_izz_is_not_measured_where_a_window_turns_against_its_push():
         return PushedIdentification(fit, np.array([0.4, 0.7, 1e-3]), [], (0, 0, 0), (0, 0, 0), {}, SlidingConfig(),
                                     None, turns)
 
-    assert pushed([False, False, False]).izz_measured
+    assert pushed([False, False, False]).turns_explained
     flagged = pushed([False, True, False])
-    assert not flagged.izz_measured
+    assert not flagged.turns_explained
     assert flagged.provenance()["turn_check"] == {"windows_against": 1, "windows": 3, "izz_balance_kgm2": [np.inf],
-                                                  "izz_fitted_kgm2": 4e-3, "izz_measured": False}
+                                                  "izz_fitted_kgm2": 4e-3, "turns_explained": False}
 
 
 def test_push_without_contact_topic_names_the_file(tmp_path):
