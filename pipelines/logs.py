@@ -31,7 +31,7 @@ from __future__ import annotations
 import json
 import warnings
 from collections import Counter, deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -324,6 +324,26 @@ class Recording:
             self.wrench.t_s, self.wrench_raw.t_s
         ):
             raise ValueError("Recording.wrench_raw: expected the same stamps as Recording.wrench")
+
+    def wrench_acted(self, delay_s: float) -> WrenchTrack:
+        """`wrench` as it acted if the sensor stamped each sample `delay_s` [s] late (early if negative).
+
+        Each sample acted at its stamp less the delay, and so did the sensor's orientation: a sensor frame that
+        moves with the tracked frame (a wrist sensor) was resolved to world through the pose at the late stamp,
+        so the sample is turned back through the pose's rotation over the delay, torque about the tracked
+        origin included (exact for a sensor rigid with the tracked frame). Shifting only the stamps leaves
+        that rotation in: on a held sphere turning at about 1 rad/s an 11 ms delay so corrected still
+        replayed 1.74 mm off against 0.69 mm for the same motion recorded without it. A wrench in world axes
+        only moves in time.
+        """
+        t_acted = self.wrench.t_s - delay_s
+        if delay_s == 0.0 or self.wrench_raw.frame_id in (self.pose.frame_id, "world"):
+            return replace(self.wrench, t_s=t_acted)
+        _, q_stamp = self.pose.interpolate(self.wrench.t_s)
+        _, q_acted = self.pose.interpolate(t_acted)
+        turn = Rotation.from_quat(q_acted) * Rotation.from_quat(q_stamp).inv()
+        return replace(self.wrench, t_s=t_acted, force=turn.apply(np.array(self.wrench.force)),
+                       torque=turn.apply(np.array(self.wrench.torque)))
 
 
 @dataclass(frozen=True)

@@ -114,9 +114,9 @@ class _Model:
 
 
 def _rows(recording, delay_s: float = 0.0) -> NewtonEulerRows:
-    w = recording.wrench
+    w = recording.wrench_acted(delay_s)
     return newton_euler_rows(recording.pose.t_s, recording.pose.position, recording.pose.quat_xyzw,
-                             w.t_s - delay_s, w.force, w.torque)
+                             w.t_s, w.force, w.torque)
 
 
 def _split(coef: np.ndarray, lib: Library, names) -> dict:
@@ -221,9 +221,9 @@ def _replay(recording, X_tracked_body: Pose, inertial: Inertial, effect: np.ndar
     from the smoothed measured state and is compared with the smoothed track: tracker noise on a start
     velocity would otherwise set a floor that hides any effect below it. Before and after alike.
     """
-    p, w = recording.pose, recording.wrench
+    p, w = recording.pose, recording.wrench_acted(delay_s)
     id_config = IdentifyConfig()
-    windows = make_windows(p.t_s, p.position, p.quat_xyzw, w.t_s - delay_s, w.force, w.torque, window_s=window_s,
+    windows = make_windows(p.t_s, p.position, p.quat_xyzw, w.t_s, w.force, w.torque, window_s=window_s,
                            substeps=id_config.substeps, smoothing_hz=id_config.smoothing_hz)
     rollout = FreeBodyRollout(windows, X_tracked_body, sets=1, requires_grad=False)
     theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())[None]
@@ -249,9 +249,9 @@ def _newton_refit(trials, X_tracked_body: Pose, inertial: Inertial, effect: np.n
     """
     id_config = IdentifyConfig(window_s=config.window_s)
     windows = concat_windows([
-        make_windows(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s - delay_s, r.wrench.force,
-                     r.wrench.torque, window_s=id_config.window_s, substeps=id_config.substeps,
-                     smoothing_hz=id_config.smoothing_hz) for r in trials])
+        make_windows(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, w.t_s, w.force, w.torque,
+                     window_s=id_config.window_s, substeps=id_config.substeps, smoothing_hz=id_config.smoothing_hz)
+        for r, w in ((r, r.wrench_acted(delay_s)) for r in trials)])
     K = len(slots)
     rollout = FreeBodyRollout(windows, X_tracked_body, sets=1 + 2 * K, requires_grad=False)
     theta = np.tile(theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix()), (1 + 2 * K, 1))

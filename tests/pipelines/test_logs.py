@@ -129,6 +129,32 @@ def test_wrench_in_rotating_tracked_frame_comes_out_in_world_axes(tmp_path):
     np.testing.assert_array_equal(rec.wrench_raw.force, np.tile(f, (7, 1)))
 
 
+def test_wrench_acted_turns_a_late_wrist_sample_back_with_the_pose(tmp_path):
+    """A wrist sensor that stamps late was resolved through the pose at the late stamp: the wrench as it
+    acted undoes that turn as well as the stamp; a world wrench only moves in time."""
+    t = np.linspace(0.0, 2.0, 201)
+    omega, delay = 1.0, 0.011  # rad/s about world z; s
+    pose = _pose(t, angle=omega * t)
+    f_world, tau_world = np.array([0.3, -0.2, 0.5]), np.array([0.01, 0.02, -0.03])
+    tw = np.linspace(0.1, 1.8, 35)  # when the samples acted
+    acting = Rotation.from_rotvec(np.c_[0 * tw, 0 * tw, omega * tw])
+    wrist = WrenchTrack(tw + delay, acting.inv().apply(f_world), acting.inv().apply(tau_world), "/ft", "gripper")
+    rec = read_recording(write_recording(tmp_path / "late.mcap", pose=pose, wrench=wrist))
+
+    acted = rec.wrench_acted(delay)
+    np.testing.assert_allclose(acted.t_s, tw, atol=1e-9)
+    np.testing.assert_allclose(acted.force, np.tile(f_world, (len(tw), 1)), atol=1e-9)
+    np.testing.assert_allclose(acted.torque, np.tile(tau_world, (len(tw), 1)), atol=1e-9)
+    # shifting the stamps alone leaves each sample turned by omega * delay
+    assert np.abs(rec.wrench.force - f_world).max() > 0.5 * omega * delay * np.linalg.norm(f_world[:2])
+
+    world = read_recording(write_recording(tmp_path / "world.mcap", pose=pose,
+                                           wrench=_wrench(tw + delay, f_world, tau_world, "world")))
+    moved = world.wrench_acted(delay)
+    np.testing.assert_allclose(moved.t_s, tw, atol=1e-9)
+    np.testing.assert_array_equal(moved.force, world.wrench.force)
+
+
 def test_wrench_in_static_sensor_frame_shifts_torque_to_tracked_origin(tmp_path):
     """A sensor frame offset through /tf_static: hand-computed force and shifted torque."""
     t = np.array([0.0, 0.5, 1.0])
