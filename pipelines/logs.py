@@ -297,6 +297,8 @@ class Recording:
         contact: contact point in world, or None.
         joints: joint states, or None.
         duration_s: from the first to the last stamp of `pose` and `wrench` [s].
+        wrench_turns_with_pose: the wrench's frame turns with the tracked frame (it is that frame, or hangs
+            off it through constant transforms: a wrist sensor), so it was resolved to world through the pose.
     """
 
     path: Path
@@ -306,6 +308,7 @@ class Recording:
     contact: PointTrack | None
     joints: JointTrack | None
     duration_s: float
+    wrench_turns_with_pose: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "path", Path(self.path))
@@ -328,16 +331,15 @@ class Recording:
     def wrench_acted(self, delay_s: float) -> WrenchTrack:
         """`wrench` as it acted if the sensor stamped each sample `delay_s` [s] late (early if negative).
 
-        Each sample acted at its stamp less the delay, and so did the sensor's orientation: a sensor frame that
-        moves with the tracked frame (a wrist sensor) was resolved to world through the pose at the late stamp,
-        so the sample is turned back through the pose's rotation over the delay, torque about the tracked
-        origin included (exact for a sensor rigid with the tracked frame). Shifting only the stamps leaves
-        that rotation in: on a held sphere turning at about 1 rad/s an 11 ms delay so corrected still
-        replayed 1.74 mm off against 0.69 mm for the same motion recorded without it. A wrench in world axes
-        only moves in time.
+        Each sample acted at its stamp less the delay, and so did the sensor's orientation: a wrist sensor
+        (`wrench_turns_with_pose`) was resolved to world through the pose at the late stamp, so the sample is
+        turned back through the pose's rotation over the delay, torque about the tracked origin included.
+        Shifting only the stamps leaves that rotation in: on a held sphere turning at about 1 rad/s an 11 ms
+        delay so corrected still replayed 1.74 mm off against 0.69 mm for the same motion recorded without
+        it. Any other wrench only moves in time.
         """
         t_acted = self.wrench.t_s - delay_s
-        if delay_s == 0.0 or self.wrench_raw.frame_id in (self.pose.frame_id, "world"):
+        if delay_s == 0.0 or not self.wrench_turns_with_pose:
             return replace(self.wrench, t_s=t_acted)
         _, q_stamp = self.pose.interpolate(self.wrench.t_s)
         _, q_acted = self.pose.interpolate(t_acted)
@@ -977,7 +979,16 @@ def read_recording(
         p_track, _ = pose.interpolate(t_w)
         torque = torque + np.cross(p_frame - p_track, force)
     wrench = WrenchTrack(t_w, force, torque, wrench_d.topic, world)
+    rigid = {pose.child_frame_id}  # the frames held to the tracked one by constant transforms
+    grew = True
+    while grew:
+        grew = False
+        for e in tf_edges:
+            if len(e.t) == 1 and (e.parent in rigid) != (e.child in rigid):
+                rigid |= {e.parent, e.child}
+                grew = True
 
     t0 = min(pose.t_s[0], wrench.t_s[0])
     t1 = max(pose.t_s[-1], wrench.t_s[-1])
-    return Recording(path, pose, wrench, wrench_raw, contact, joints, float(t1 - t0))
+    return Recording(path, pose, wrench, wrench_raw, contact, joints, float(t1 - t0),
+                     wrench_turns_with_pose=fixed_rotation is None and wrench_frame in rigid)

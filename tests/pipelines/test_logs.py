@@ -141,6 +141,7 @@ def test_wrench_acted_turns_a_late_wrist_sample_back_with_the_pose(tmp_path):
     wrist = WrenchTrack(tw + delay, acting.inv().apply(f_world), acting.inv().apply(tau_world), "/ft", "gripper")
     rec = read_recording(write_recording(tmp_path / "late.mcap", pose=pose, wrench=wrist))
 
+    assert rec.wrench_turns_with_pose
     acted = rec.wrench_acted(delay)
     np.testing.assert_allclose(acted.t_s, tw, atol=1e-9)
     np.testing.assert_allclose(acted.force, np.tile(f_world, (len(tw), 1)), atol=1e-9)
@@ -150,6 +151,7 @@ def test_wrench_acted_turns_a_late_wrist_sample_back_with_the_pose(tmp_path):
 
     world = read_recording(write_recording(tmp_path / "world.mcap", pose=pose,
                                            wrench=_wrench(tw + delay, f_world, tau_world, "world")))
+    assert not world.wrench_turns_with_pose
     moved = world.wrench_acted(delay)
     np.testing.assert_allclose(moved.t_s, tw, atol=1e-9)
     np.testing.assert_array_equal(moved.force, world.wrench.force)
@@ -172,6 +174,7 @@ def test_wrench_in_static_sensor_frame_shifts_torque_to_tracked_origin(tmp_path)
     # (0, 0.1, 0.05) × (0, 1, −2) = (−0.25, 0, 0)  ⇒  τ_track = (−0.25, 0.1, 0)
     np.testing.assert_allclose(rec.wrench.force, [[0.0, 1.0, -2.0]] * 2, rtol=0, atol=1e-12)
     np.testing.assert_allclose(rec.wrench.torque, [[-0.25, 0.1, 0.0]] * 2, rtol=0, atol=1e-12)
+    assert rec.wrench_turns_with_pose  # held to the gripper by /tf_static: a wrist sensor
 
 
 def test_world_wrench_acts_at_the_contact_point(tmp_path):
