@@ -187,14 +187,29 @@ def _heldout_score(trials, holdout, names, com_tracked, config: DiagnoseConfig,
     return bic(rss, n, k)
 
 
-def _com_covariance(lib: Library, names, pi: np.ndarray, X_tracked_body: Pose) -> np.ndarray:
-    """Covariance of the object-frame COM from the thinned rows' least-squares covariance."""
+def _covariance(lib: Library, names) -> np.ndarray:
+    """Least-squares covariance of the inertial and `names`' coefficients on the thinned (nearly independent)
+    rows of `lib`."""
     cols = list(range(10)) + [c for n in names for c in range(*lib.groups[n])]
     X = lib.X[:, cols]
-    coef, rss, n = fit_subset(lib, names)
-    cov = np.linalg.pinv(X.T @ X) * rss / max(n - len(cols), 1)
+    _, rss, n = fit_subset(lib, names)
+    return np.linalg.pinv(X.T @ X) * rss / max(n - len(cols), 1)
+
+
+def _com_covariance(lib: Library, names, pi: np.ndarray, X_tracked_body: Pose) -> np.ndarray:
+    """Covariance of the object-frame COM from the thinned rows' least-squares covariance."""
+    cov = _covariance(lib, names)
     _, J = object_frame_from_pi(pi, X_tracked_body)
     return (J[:, :10] @ cov[:10, :10] @ J[:, :10].T)[1:4, 1:4]
+
+
+def _effect_stds(trials, model: _Model, com_tracked: np.ndarray) -> dict[str, dict]:
+    """Standard deviation of each of `model`'s effect parameters, keyed and in units as its parameters: the
+    least-squares covariance on the trials' rows taken at the fitted delay, where a delay's own column (the
+    wrench's rate, its linearisation) gives the delay's."""
+    lib = build_library([_rows(r, model.delay_s) for r in trials], com_tracked, model.names)
+    std = np.sqrt(np.diag(_covariance(lib, model.names)))
+    return {n: CANDIDATES[n].params(std[slice(*lib.groups[n])]) for n in model.names}
 
 
 def _physical(inertial: Inertial) -> Inertial:
@@ -341,18 +356,20 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
                 **{n: effect[list(CANDIDATES[n].effect_slots)] for n in best if CANDIDATES[n].effect_slots}})
 
     effects = []
+    stds = _effect_stds(trials, model, com_tracked) if best else {}
     # most certain first: inclusion probability, then the held-out criterion of the effect alone
     for name in sorted(best, key=lambda n: (-screening.inclusion[n], scores[n])):
         c = CANDIDATES[name]
         effects.append(Effect(name, c.params(model.coefficients[name]), {
             "inclusion_probability": screening.inclusion[name], "belongs": c.belongs,
-            "criterion_gain": scores["none"] - scores[chosen],
+            "criterion_gain": scores["none"] - scores[chosen], "std": stds[name],
             **({"newton_refit": newton} if newton and c.effect_slots else {}),
         }))
     if density:
         effects.append(Effect(NONUNIFORM_DENSITY, {"com_shift": shift.tolist()}, {
             "mahalanobis": mahalanobis, "belongs": "object",
             "criterion_gain": scores[f"{chosen} (uniform-density COM)"] - scores[chosen],
+            "std": {"com_shift": np.sqrt(np.diag(cov)).tolist()},
         }))
     for e in effects:
         e.evidence.update({"heldout_rmse_position_before_m": fit_before.rmse_position_m,

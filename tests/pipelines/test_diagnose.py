@@ -63,14 +63,18 @@ def test_clean_recording_reports_nothing(tmp_path_factory):
 
 @pytest.mark.parametrize("name, key", [("sensor_bias", "force"), ("viscous_damping", "b")])
 def test_concealed_effect_named_and_quantified(tmp_path_factory, name, key):
-    """A concealed effect 3x the noise is named first, its main parameter within 15 %, and the held-out
-    position error and the wrench residual fall."""
+    """A concealed effect 3x the noise is named first, its main parameter within 15 % and within three of its
+    reported standard deviations per component, and the held-out position error and the wrench residual fall."""
     effect, (trial, holdout, prior, X_tracked_body) = _case(tmp_path_factory, name, 3.0, 5)
     diagnosis = diagnose_held([trial], holdout, X_tracked_body, prior, CONFIG)
-    assert diagnosis.effects[0].name == name
-    found = np.linalg.norm(diagnosis.effects[0].params[key])
+    top = diagnosis.effects[0]
+    assert top.name == name
+    found = np.linalg.norm(top.params[key])
     truth = np.linalg.norm(effect.params[key])
     assert found == pytest.approx(truth, rel=0.15)
+    std = np.atleast_1d(top.evidence["std"][key])
+    assert np.all(std > 0)
+    assert np.all(np.abs(np.atleast_1d(top.params[key]) - np.atleast_1d(effect.params[key])) < 3 * std)
     assert diagnosis.fits["after"].rmse_position_m < diagnosis.fits["before"].rmse_position_m
     assert sum(diagnosis.residuals["after"].rms) < sum(diagnosis.residuals["before"].rms)
 
