@@ -119,10 +119,11 @@ def diagnosis_section(asset: dict, traces: dict | None) -> str:
         return ""
     effects = "".join(
         f"<tr><td>{html.escape(e['name'])}</td><td>{_fmt(e['params'])}</td>"
+        f"<td>{_fmt(e['evidence'].get('std', ''))}</td>"
         f"<td>{_fmt(e['evidence'].get('inclusion_probability', ''))}</td>"
         f"<td>{html.escape(str(e['evidence'].get('belongs', '')))}</td></tr>"
         for e in asset.get("effects", [])
-    ) or "<tr><td colspan=4>none: no candidate improves the held-out prediction</td></tr>"
+    ) or "<tr><td colspan=5>none: no candidate improves the held-out prediction</td></tr>"
     unexplained = "".join(f"<li>{html.escape(u['summary'])}</li>" for u in asset.get("unexplained", [])) or "<li>none</li>"
     findings = "".join(f"<li>{html.escape(f)}</li>" for f in d.get("findings", [])) or "<li>residual white</li>"
     inclusion = ", ".join(f"{html.escape(k)} {v:.2f}" for k, v in d["screening"]["inclusion"].items())
@@ -130,7 +131,7 @@ def diagnosis_section(asset: dict, traces: dict | None) -> str:
                    "</tr>" for k, v in d["fits"].items())
     plot = f'<img src="data:image/png;base64,{diagnosis_plots(traces)}">' if traces else ""
     return f"""<h2>Diagnosis ({html.escape(d['evaluation'])})</h2>
-<table><tr><th>effect</th><th>params (SI)</th><th>inclusion probability</th><th>belongs to</th></tr>{effects}</table>
+<table><tr><th>effect</th><th>params (SI)</th><th>standard deviation</th><th>inclusion probability</th><th>belongs to</th></tr>{effects}</table>
 <p>Screening inclusion probabilities: {inclusion}</p>
 <h3>Unexplained</h3><ul>{unexplained}</ul>
 <h3>Residual before diagnosis</h3><ul>{findings}</ul>
