@@ -124,8 +124,10 @@ class ReconstructConfig:
     region_margin: float = 0.15
     """Margin around the segmented object for the fusion box, per axis as a fraction of the object's size
     along it (at least a quarter of its largest extent), plus the truncation."""
-    cut_height_voxels: float = 3.0
-    """Height above the support plane where the table is cut away [voxels]; the slab below is extruded."""
+    cut_height_voxels: float = 1.5
+    """Height above the support plane where the table is cut away [voxels]; the slab below is extruded. The
+    slab is the cut's cross-section carried down to the table, so it overfills wherever the object narrows
+    towards its contact: a 30 cm ball (3.4 mm voxels) was 1.68 mm off in COM at 3 voxels, 1.42 mm at 1.5."""
     smoothing_iterations: int = 10
     """Taubin smoothing steps (lambda 0.5, mu -0.53; volume-preserving) on the marching-cubes mesh, 0-50.
     On the 4 cm test cube, 10 steps cut the mean surface error from 0.10 to 0.08 mm."""
