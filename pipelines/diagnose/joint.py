@@ -104,7 +104,7 @@ def _time_blocks(recording, blocks: int = 2) -> list:
             for a, b in zip(edges[:-1], edges[1:])]
 
 
-def _metrics(joint, q_sim: np.ndarray, windows) -> FitMetrics:
+def replay_fit(joint, q_sim: np.ndarray, windows) -> FitMetrics:
     """Replay error against the zero-phase smoothed q, as the free-body replay is scored against the smoothed
     track: the tracker's noise is a floor both models share and would hide how much of the motion each one
     predicts."""
@@ -209,7 +209,7 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
 
         _, q_before, windows, base_fit = fitted(())
         _, q_after, _, final = fitted(best) if best else (None, q_before, windows, base_fit)
-    fits = {"before": _metrics(joint, q_before, windows), "after": _metrics(joint, q_after, windows)}
+    fits = {"before": replay_fit(joint, q_before, windows), "after": replay_fit(joint, q_after, windows)}
 
     effects = []
     for name in sorted(best, key=lambda c: refits[(c,)]["mse"].sum()):

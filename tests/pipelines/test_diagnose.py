@@ -7,7 +7,7 @@ import pytest
 
 from pipelines.diagnose import DiagnoseConfig, diagnose_held
 from pipelines.synth.held import ConcealedEffect, SensorNoise
-from twin.bench.diagnose import Case, concealed_effect, record_case
+from twin.bench.diagnose import Case, concealed_effect, record_case, true_model_fit
 
 DURATION_S = 2.0
 CONFIG = DiagnoseConfig(bootstraps=10)
@@ -77,6 +77,10 @@ def test_concealed_effect_named_and_quantified(tmp_path_factory, name, key):
     assert np.all(np.abs(np.atleast_1d(top.params[key]) - np.atleast_1d(effect.params[key])) < 3 * std)
     assert diagnosis.fits["after"].rmse_position_m < diagnosis.fits["before"].rmse_position_m
     assert sum(diagnosis.residuals["after"].rms) < sum(diagnosis.residuals["before"].rms)
+    # the model that made the recordings, replayed the same way, is what the found one approaches
+    truth = true_model_fit(Case("cube", effect, 3.0, 5), holdout, X_tracked_body, prior, CONFIG.window_s)
+    assert truth.rmse_position_m < diagnosis.fits["before"].rmse_position_m
+    assert diagnosis.fits["after"].rmse_position_m == pytest.approx(truth.rmse_position_m, rel=0.15)
 
 
 def test_concealed_effect_rejects_unknown_name():

@@ -8,14 +8,22 @@ import pytest
 from pipelines.diagnose import DiagnoseConfig, diagnose_jointed
 from pipelines.synth.held import SensorNoise
 from pipelines.synth.jointed import jointed_paper_objects
-from twin.bench.diagnose import Case, concealed_joint_effect, record_joint_case
+from twin.bench.diagnose import (
+    Case,
+    concealed_joint_effect,
+    record_joint_case,
+    true_joint_model_fit,
+)
 
 
 def test_passive_joint_force_gradient_matches_central_difference():
     """d(joint force)/d(Stribeck excess) from the tape equals the finite difference, -exp(-(qd/v_s)^2) tanh(qd/eps)."""
     import warp as wp
 
-    from pipelines.synth.jointed import JOINT_EFFECT_SIZE, apply_joint_effort_and_passive_forces
+    from pipelines.synth.jointed import (
+        JOINT_EFFECT_SIZE,
+        apply_joint_effort_and_passive_forces,
+    )
 
     q, qd, eps, v_s = 0.1, 0.02, 0.01, 0.03
 
@@ -55,6 +63,10 @@ def test_concealed_door_spring_named_and_quantified(tmp_path):
     assert sign * params["q0"] == pytest.approx(effect.params["q0"], abs=0.1)
     assert refit is not None and "stiffness" in refit.names
     assert diagnosis.fits["after"].rmse_position_m < 0.5 * diagnosis.fits["before"].rmse_position_m
+    # the true spring in the found joint's coordinates (q0's sign follows the axis found) replays as well
+    truth = true_joint_model_fit(Case("cabinet_door", effect, 3.0, 3), holdout, joint, placement, prior,
+                                 DiagnoseConfig().joint_window_s)
+    assert truth.rmse_position_m == pytest.approx(diagnosis.fits["after"].rmse_position_m, rel=0.25)
 
 
 def test_weak_drawer_damping_quantified_in_diagnose_windows(tmp_path):
