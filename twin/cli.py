@@ -121,7 +121,7 @@ class Bench:
     throughput: time per identification iteration for 1 and many objects batched, on --device.
     crlb: spread of the estimates over --draws noise draws against the Cramer-Rao bound.
     mujoco: paper's recordings identified by mujoco.sysid (pseudo-inertia) and by ours, side by side.
-    reconstruct: scans of real meshes and primitives (3-30 cm, two noise levels) against their truth; real Kinect frames.
+    reconstruct: scans of real meshes and primitives (3-30 cm, three noise levels) against their truth; real frames.
     push: synthetic pushes with known friction (--seeds of them): friction, mass and yaw inertia errors.
     push-real: the MIT block pushes: friction per trial and its spread, quasi-static estimate, predictive validity.
     push-mit: the MIT pushing dataset's trials (mass known): friction per trial, spread, predictive validity.
@@ -155,6 +155,8 @@ class Bench:
     """reconstruct: only the objects also scanned a second time, turned over (the two-session columns)."""
     names: tuple[str, ...] = ()
     """reconstruct: objects to run, named as in its table (e.g. "Allen Key" "cube 30 cm"; default all)."""
+    noise: tuple[str, ...] = ()
+    """reconstruct: depth-noise levels to run (low, high, sensor; default all), without the noise-free scans."""
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
     concealed: int = 40
@@ -315,7 +317,8 @@ def main(argv: list[str] | None = None) -> int:
             elif command.what == "reconstruct":
                 from twin.bench.reconstruct import bench_reconstruct
 
-                bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only, names=command.names)
+                bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only, names=command.names,
+                                  noises=command.noise)
             elif command.what == "push":
                 from twin.bench.push import bench_push
 

@@ -65,3 +65,22 @@ def test_mesh_picture_frames_the_mesh(tmp_path):
     camera = look_at((0.2, -0.3, 0.3), (0.2, 0.1, 0.02))
     np.testing.assert_allclose(camera[:3, :3].T @ camera[:3, :3], np.eye(3), atol=1e-12)
     assert render_mesh_image(_cube(), tmp_path / "other.png", camera, width=40, height=30).is_file()
+
+
+def test_smooth_depth_noise_keeps_its_sigma_and_moves_in_patches():
+    """With depth_noise_smoothing_px the noise keeps sigma(z) but neighbouring pixels move together: on a flat
+    wall 0.7 m away, pixels 1 apart differ by far less than white noise's sqrt(2) sigma, pixels 64 apart by it."""
+    from pipelines.synth.render import _sensor_depth
+
+    z = np.full((480, 640), 0.7)
+    ones = np.ones_like(z, bool)
+    base = dict(depth_noise_base_m=2e-3, depth_noise_quadratic_per_m=0.0, depth_unit_m=2e-5, dropout_random=0.0,
+                dropout_grazing_cos=0.0, dropout_edge=0.0)
+    for smoothing, lag1 in ((0.0, np.sqrt(2)), (8.0, 0.1)):
+        config = RenderConfig(**base, depth_noise_smoothing_px=smoothing)
+        noise = _sensor_depth(z, ones, ones.astype(float), config, np.random.default_rng(0)) * 2e-5 - 0.7
+        np.testing.assert_allclose(noise.std(), 2e-3, rtol=0.05)
+        near = np.std(noise[:, 1:] - noise[:, :-1]) / 2e-3
+        far = np.std(noise[:, 64:] - noise[:, :-64]) / 2e-3
+        np.testing.assert_allclose(near, lag1, rtol=0.3)
+        np.testing.assert_allclose(far, np.sqrt(2), rtol=0.1)
