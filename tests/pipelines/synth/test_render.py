@@ -74,10 +74,10 @@ def test_smooth_depth_noise_keeps_its_sigma_and_moves_in_patches():
 
     z = np.full((480, 640), 0.7)
     ones = np.ones_like(z, bool)
-    base = dict(depth_noise_base_m=2e-3, depth_noise_quadratic_per_m=0.0, depth_unit_m=2e-5, dropout_random=0.0,
-                dropout_grazing_cos=0.0, dropout_edge=0.0)
     for smoothing, lag1 in ((0.0, np.sqrt(2)), (8.0, 0.1)):
-        config = RenderConfig(**base, depth_noise_smoothing_px=smoothing)
+        config = RenderConfig(depth_noise_base_m=2e-3, depth_noise_quadratic_per_m=0.0, depth_unit_m=2e-5,
+                              dropout_random=0.0, dropout_grazing_cos=0.0, dropout_edge=0.0,
+                              depth_noise_smoothing_px=smoothing)
         noise = _sensor_depth(z, ones, ones.astype(float), config, np.random.default_rng(0)) * 2e-5 - 0.7
         np.testing.assert_allclose(noise.std(), 2e-3, rtol=0.05)
         near = np.std(noise[:, 1:] - noise[:, :-1]) / 2e-3
