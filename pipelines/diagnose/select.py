@@ -228,7 +228,7 @@ def _residual(rows: NewtonEulerRows, model: _Model, com_tracked: np.ndarray) -> 
 
 
 def replay_held(recording, X_tracked_body: Pose, inertial: Inertial, effect: np.ndarray, delay_s: float,
-            window_s: float) -> tuple[FitMetrics, dict]:
+                window_s: float) -> tuple[FitMetrics, dict]:
     """Newton windowed replay of `recording` with the effects; position error and traces (with the mean
     squared position error per window [m^2], "window_mse").
 
@@ -333,10 +333,10 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
     after_inertial = _physical(found_inertial)
     evaluation = holdout if holdout is not None else trials[0]
     effect = effect_vector({n: x for n, x in model.coefficients.items() if n != "time_delay"})
-    fit_before, trace_before = replay_held(evaluation, X_tracked_body, before_inertial, np.zeros_like(effect), 0.0,
-                                       config.window_s)
+    fit_before, trace_before = replay_held(evaluation, X_tracked_body, before_inertial, np.zeros_like(effect),
+                                           0.0, config.window_s)
     fit_after, trace_after = replay_held(evaluation, X_tracked_body, after_inertial, effect, model.delay_s,
-                                     config.window_s)
+                                         config.window_s)
     slots = [k for n in best if CANDIDATES[n].effect_slots for k in CANDIDATES[n].effect_slots]
     newton = None
     if slots:
@@ -345,7 +345,7 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
         # wrench does (a 0.6-ratio damping came back 19 % low for a 3 % lower replay error)
         refit, losses = _newton_refit(trials, X_tracked_body, after_inertial, effect, slots, model.delay_s, config)
         fit_newton, trace_newton = replay_held(evaluation, X_tracked_body, after_inertial, refit, model.delay_s,
-                                           config.window_s)
+                                               config.window_s)
         newton = {"trial_position_loss_m2": losses, "heldout_rmse_position_m": fit_newton.rmse_position_m,
                   "heldout_rmse_position_least_squares_m": fit_after.rmse_position_m,
                   "kept": predicts_better(trace_newton["window_mse"], trace_after["window_mse"])}
