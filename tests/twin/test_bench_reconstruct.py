@@ -1,4 +1,4 @@
-"""Tests of twin.bench.reconstruct's pieces: truth meshes from CAD shells, Chamfer distance, the summary."""
+"""Tests of twin.bench.reconstruct's pieces: truth meshes from CAD shells, Chamfer distance, the summary, depth noise."""
 
 from __future__ import annotations
 
@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from twin.bench.reconstruct import _chamfer, _plane_depth_errors, _rest, _summarise, _watertight_from_mm
+from twin.bench.reconstruct import (
+    _chamfer,
+    _plane_depth_errors,
+    _rest,
+    _summarise,
+    _watertight_from_mm,
+)
 
 
 def test_overlapping_open_shells_become_one_watertight_solid(tmp_path):
