@@ -1,4 +1,4 @@
-"""Tests of twin.bench.reconstruct's pieces: truth meshes from CAD shells, Chamfer distance, the summary, depth noise."""
+"""Tests of twin.bench.reconstruct's pieces: truth meshes from CAD shells, Chamfer distance, summary, depth noise."""
 
 from __future__ import annotations
 
