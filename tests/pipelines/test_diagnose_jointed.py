@@ -64,7 +64,7 @@ def test_concealed_door_spring_named_and_quantified(tmp_path):
     assert refit is not None and "stiffness" in refit.names
     assert diagnosis.fits["after"].rmse_position_m < 0.5 * diagnosis.fits["before"].rmse_position_m
     # the true spring in the found joint's coordinates (q0's sign follows the axis found) replays as well
-    truth = true_joint_model_fit(Case("cabinet_door", effect, 3.0, 3), holdout, joint, placement, prior,
+    truth = true_joint_model_fit(Case("cabinet_door", effect, 3.0, 3), holdout, joint, placement,
                                  DiagnoseConfig().joint_window_s)
     assert truth.rmse_position_m == pytest.approx(diagnosis.fits["after"].rmse_position_m, rel=0.25)
 

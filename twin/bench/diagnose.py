@@ -215,40 +215,26 @@ def true_model_fit(case: Case, holdout, X_tracked_body, prior, window_s: float):
     return replay_held(holdout, X_tracked_body, truth, effect_vector(coefficients), delay_s, window_s)[0]
 
 
-def true_joint_model_fit(case: Case, holdout, joint, placement, prior, window_s: float):
-    """`true_model_fit` for a jointed case: the part's true body, friction and concealed passive force in the
-    identification's parameters on the joint `detect_kind` found, replayed as `diagnose_jointed` replays."""
+def true_joint_model_fit(case: Case, holdout, joint, placement, window_s: float):
+    """`true_model_fit` for a jointed case: the part's true body and friction (the joint body's prior values with
+    the truth as its prior) and its concealed passive force, on the joint `detect_kind` found, replayed as
+    `diagnose_jointed` replays."""
     from pipelines.diagnose import replay_fit
     from pipelines.identify.jointed import JointedConfig, joint_body, replay_jointed
     from pipelines.synth.jointed import jointed_paper_objects
 
     obj = jointed_paper_objects()[case.shape]
-    effect = case.effect
-    names = (effect.name,) if effect is not None else ()
+    truth, effect = obj.inertial(), case.effect
     config = JointedConfig(window_s=window_s)
-    body = joint_body(joint, placement, prior, config, names)
-    if joint.type == "prismatic":
-        values = [obj.mass_kg, obj.friction]
-    else:
-        a = joint.axis
-        r = np.asarray(obj.position_m) - joint.origin  # the object frame's origin is the part's COM
-        r_perp = r - a * (a @ r)
-        x, y, z = obj.size_m  # a uniform box with world axes at q = 0
-        inertia = obj.mass_kg / 12 * np.diag([y * y + z * z, x * x + z * z, x * x + y * y])
-        values = [a @ inertia @ a + obj.mass_kg * r_perp @ r_perp]
-        if body.base_count == 4:
-            values += list(obj.mass_kg * (body.basis @ r))
-        values.append(obj.friction)
+    body = joint_body(joint, placement, truth, config, (effect.name,) if effect is not None else ())
+    values = body.prior_values(obj.friction)
     if effect is not None:
         p = effect.params
         sign = float(np.sign(joint.axis @ np.asarray(obj.axis)))  # q found along the true axis or against it
-        if effect.name == "viscous_damping":
-            values.append(p["b"])
-        elif effect.name == "spring":
-            values += [p["k"], sign * p["k"] * p["q0"]]
-        else:
-            values += [p["f_s"] - p["f_c"], p["v_s"]]
-    _, q_sim, windows = replay_jointed(holdout, joint, placement, prior, body, np.array(values), config)
+        values[body.base_count:] = ([p["b"]] if effect.name == "viscous_damping" else  # JOINT_EFFECT_PARAMS' order
+                                    [p["k"], sign * p["k"] * p["q0"]] if effect.name == "spring" else
+                                    [p["f_s"] - p["f_c"], p["v_s"]])
+    _, q_sim, windows = replay_jointed(holdout, joint, placement, truth, body, values, config)
     return replay_fit(joint, q_sim, windows)
 
 
@@ -309,7 +295,7 @@ def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0
             if case.shape in JOINT_OBJECTS:
                 trial, holdout, joint, placement, prior = record_joint_case(case, Path(tmp))
                 diagnosis, _ = diagnose_jointed([trial], holdout, joint, placement, prior, config=config)
-                true_fit = true_joint_model_fit(case, holdout, joint, placement, prior, config.joint_window_s)
+                true_fit = true_joint_model_fit(case, holdout, joint, placement, config.joint_window_s)
             else:
                 trial, holdout, prior, X_tracked_body = record_case(case, Path(tmp), duration_s)
                 diagnosis = diagnose_held([trial], holdout, X_tracked_body, prior, config)
