@@ -459,12 +459,12 @@ def _segment(views: list[_View], config: ReconstructConfig, scan: Scan) -> _Segm
         background = points[~flags]
         if len(background) < 100:
             raise ReconstructError(f"{scan.root}: too few unmasked points to fit the support plane")
-        normal, offset, rms = _fit_plane(background, plane_thr, footprint, cameras, config)
+        normal, offset, rms = fit_plane(background, plane_thr, footprint, cameras, config)
         noise = _depth_noise(background, origins[~flags], normal, offset, plane_thr)
         candidates = points[flags]
         method = "masks"
     else:
-        normal, offset, rms = _fit_plane(points, plane_thr, footprint, cameras, config)
+        normal, offset, rms = fit_plane(points, plane_thr, footprint, cameras, config)
         noise = _depth_noise(points, origins, normal, offset, plane_thr)
         candidates = points[points @ normal + offset > min_height]
         method = "plane+dbscan"
@@ -496,7 +496,7 @@ def _segment(views: list[_View], config: ReconstructConfig, scan: Scan) -> _Segm
     return _Segmentation((normal, offset), noise, obj, lo, hi, extent, stats)
 
 
-def _fit_plane(
+def fit_plane(
     points: np.ndarray, threshold: float, footprint: float, cameras: np.ndarray, config: ReconstructConfig
 ) -> tuple[np.ndarray, float, float]:
     """RANSAC plane, refined by least squares on its inliers; normal towards the cameras."""

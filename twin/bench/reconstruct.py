@@ -458,25 +458,24 @@ def _real_depth_noise(data_root: Path, bin_m: float = 0.2, max_depth_m: float = 
     return rows
 
 
-def _plane_depth_errors(depth_m: np.ndarray, K: np.ndarray, tile_px: int = 16, seed: int = 0):
+def _plane_depth_errors(depth_m: np.ndarray, K: np.ndarray, tile_px: int = 16):
     """(depth [m], pixel error [m], total error [m]) of the pixels on one depth image's dominant plane.
 
-    The plane (a table, a floor, a wall) is found by RANSAC, and each pixel within 3 cm of it is compared
-    with the depth at which its ray meets it. "total": that depth error, with the sensor's slow waviness
-    and the surface's own flatness in it; "pixel": the same less its tile_px x tile_px tile's median, the
-    scatter from pixel to pixel that fusion averages.
+    The plane (a table, a floor, a wall) is found as the reconstruction finds its support plane (`fit_plane`:
+    RANSAC within 1 cm, refined by least squares, so reruns agree), and each pixel within 3 cm of it is
+    compared with the depth at which its ray meets it. "total": that depth error, with the sensor's slow
+    waviness and the surface's own flatness in it; "pixel": the same less its tile_px x tile_px tile's median,
+    the scatter from pixel to pixel that fusion averages.
     """
-    import open3d as o3d
     from scipy import ndimage
+
+    from pipelines.reconstruct import ReconstructConfig, fit_plane
 
     v, u = np.nonzero((depth_m > 0) & (depth_m < 3.0))
     z = depth_m[v, u]
     points = np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z], 1)
-    o3d.utility.random.seed(seed)
-    sample = o3d.utility.Vector3dVector(points[::8])  # enough for RANSAC; the errors use every pixel
-    plane, _ = o3d.geometry.PointCloud(sample).segment_plane(0.01, 3, 2000)
-    normal, offset = np.asarray(plane[:3]), plane[3]
-    # RANSAC's 1 cm band would clip the far bins' scatter; 3 cm keeps it, the MAD ignores the rest
+    normal, offset, _ = fit_plane(points, 0.01, 0.005, np.zeros((1, 3)), ReconstructConfig())
+    # the 1 cm band would clip the far bins' scatter; 3 cm keeps it, the MAD ignores the rest
     inliers = np.abs(points @ normal + offset) < 0.03
     q = points[inliers]
     slope = np.abs(q @ normal) / q[:, 2]  # d(distance to the plane) / d(depth) along each ray
