@@ -40,7 +40,7 @@ NOISE_LEVELS = {"low": (0.5e-3, 1.5e-3, 0.0), "high": (1.5e-3, 4.5e-3, 0.0), "se
 """Depth noise per level: sigma(z) = a + c z^2 and its smoothing (0: independent per pixel), as (a [m], c [1/m],
 smoothing [pixels]; `RenderConfig.depth_noise_smoothing_px`). low and high are white, 0.74 / 2.2 mm at 0.4 m.
 sensor is the real frames' noise as `_real_depth_noise` measures it: sigma fitted to the posecnn_ycb_demo
-frames' total scatter about their table (1.99, 2.82, 3.59, 4.80 mm at 0.5, 0.7, 0.9, 1.1 m), smooth over 8
+frames' total scatter about their table (1.99, 2.81, 3.58, 4.82 mm at 0.5, 0.7, 0.9, 1.1 m), smooth over 8
 pixels as theirs is (0.2 mm between neighbouring pixels, 2.2 mm between pixels 16 apart, at 0.7 m)."""
 REFERENCE = "none"
 """A noise-free scan (no noise, no dropout, 0.1 mm depth unit), made for the workshop tools only: its
