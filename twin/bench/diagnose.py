@@ -357,6 +357,12 @@ def _summary(rows: list[dict]) -> None:
     if ratios:
         print(f"  held-out RMSE after / the true model's: median {np.median(ratios):.2f}, max {max(ratios):.2f}; "
               f"within 10 %: {sum(x <= 1.1 for x in ratios)}/{len(ratios)}")
+        # the error the sensors' noise leaves is in before, after and the truth alike; what a model can remove is
+        # the rest, sqrt(rmse^2 - truth^2) (independent errors add in squares)
+        excess = [(np.sqrt(max(r["rmse_before_m"] ** 2 - r["rmse_true_m"] ** 2, 0.0)),
+                   np.sqrt(max(r["rmse_after_m"] ** 2 - r["rmse_true_m"] ** 2, 0.0))) for r in reported]
+        print(f"  error above the true model's, sqrt(rmse^2 - truth^2), at least halved: "
+              f"{sum(after <= 0.5 * before for before, after in excess)}/{len(excess)}")
 
 
 WORKSHOP = Path(__file__).resolve().parents[3] / "shared" / "data" / "workshop-tools"
