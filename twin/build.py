@@ -322,11 +322,13 @@ def _log_diagnosis(diagnosis, log) -> None:
     fits = diagnosis.fits
     for e in diagnosis.effects:
         log(f"  effect {e.name}: {e.params}")
+    floor = (f" (the sensors' noise alone: about {1000 * diagnosis.noise_floor['rmse_position_m']:.3f} mm)"
+             if diagnosis.noise_floor else "")
     if diagnosis.effects:
         log(f"  held-out position RMSE {1000 * fits['before'].rmse_position_m:.3f} -> "
-            f"{1000 * fits['after'].rmse_position_m:.3f} mm")
+            f"{1000 * fits['after'].rmse_position_m:.3f} mm{floor}")
     else:
-        log("  no effect improves the held-out prediction")
+        log(f"  no effect improves the held-out prediction, {1000 * fits['after'].rmse_position_m:.3f} mm{floor}")
     for u in diagnosis.unexplained:
         log(f"  unexplained: {u['summary']}")
 

@@ -127,8 +127,10 @@ def diagnosis_section(asset: dict, traces: dict | None) -> str:
     unexplained = "".join(f"<li>{html.escape(u['summary'])}</li>" for u in asset.get("unexplained", [])) or "<li>none</li>"
     findings = "".join(f"<li>{html.escape(f)}</li>" for f in d.get("findings", [])) or "<li>residual white</li>"
     inclusion = ", ".join(f"{html.escape(k)} {v:.2f}" for k, v in d["screening"]["inclusion"].items())
+    # the error no model of this recording can remove, beside what the models left
+    rows = {**d["fits"], **({"sensor noise alone (estimated)": d["noise_floor"]} if "noise_floor" in d else {})}
     fits = "".join(f"<tr><td>{k}</td><td>{v['rmse_position_m'] * 1000:.3f}</td><td>{v['rmse_rotation_rad']:.5f}</td>"
-                   "</tr>" for k, v in d["fits"].items())
+                   "</tr>" for k, v in rows.items())
     plot = f'<img src="data:image/png;base64,{diagnosis_plots(traces)}">' if traces else ""
     return f"""<h2>Diagnosis ({html.escape(d['evaluation'])})</h2>
 <table><tr><th>effect</th><th>params (SI)</th><th>standard deviation</th><th>inclusion probability</th><th>belongs to</th></tr>{effects}</table>

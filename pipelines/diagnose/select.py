@@ -28,6 +28,7 @@ from assets import Effect, FitMetrics, Inertial, Pose
 from pipelines.identify.free_body import IdentifyConfig
 from pipelines.identify.inertia import nearest_physical_inertia, theta_from_physical
 from pipelines.identify.least_squares import NewtonEulerRows, newton_euler_rows, object_frame_from_pi
+from pipelines.identify.noise import estimate_noise_levels, renoised
 from pipelines.identify.rollout import FreeBodyRollout
 from pipelines.identify.windows import concat_windows, make_windows
 
@@ -70,7 +71,9 @@ class Diagnosis:
     """What was found. effects: most certain first; unexplained: DESIGN.md entries; scores:
     held-out criterion per candidate set (lower is better); fits: Newton windowed replay of the
     evaluation recording before and after; residuals: wrench residual analysis before and after
-    on the evaluation recording; traces: arrays for the report."""
+    on the evaluation recording; traces: arrays for the report; noise_floor: how much of the
+    after replay's error the sensors' noise alone accounts for (`noise_floor`), None where not estimated
+    (pushed objects)."""
 
     effects: tuple[Effect, ...]
     unexplained: tuple[dict, ...]
@@ -82,6 +85,7 @@ class Diagnosis:
     inertial: dict[str, Inertial]
     heldout: bool
     traces: dict
+    noise_floor: dict | None = None
 
     def provenance(self) -> dict:
         return {
@@ -92,6 +96,7 @@ class Diagnosis:
             "fits": {k: vars(v) for k, v in self.fits.items()},
             "residuals": {k: v.to_json() for k, v in self.residuals.items()},
             "findings": list(self.findings),
+            **({"noise_floor": self.noise_floor} if self.noise_floor is not None else {}),
         }
 
 
@@ -101,6 +106,28 @@ def predicts_better(mse: np.ndarray, reference: np.ndarray) -> bool:
     difference is of log errors: one window that diverges must not outweigh all the others."""
     d = np.log(np.maximum(mse, 1e-300)) - np.log(np.maximum(reference, 1e-300))
     return bool(d.mean() + 2 * d.std(ddof=1) / np.sqrt(len(d)) < 0)
+
+
+def noise_floor(evaluation, replay, fit: FitMetrics, rng: np.random.Generator, draws: int = 4) -> dict:
+    """How much of `fit`, the chosen model's replay error on `evaluation`, the sensors' noise alone accounts for.
+
+    `replay` maps a Recording to the FitMetrics of that model's replay of it. The noise levels are estimated from
+    `evaluation` itself (`estimate_noise_levels`) and the same amount again added to it (`renoised`), `draws`
+    times: noise independent of the model's own error adds in squares, so the squared errors rise by what the
+    recording's own noise contributes, whatever the model. An error before that is under twice this floor
+    cannot be halved by any model of the recording.
+
+    Returns rmse_position_m and rmse_rotation_rad [m, rad] of the floor, and the noise levels used.
+    """
+    p, w = evaluation.pose, evaluation.wrench
+    levels = estimate_noise_levels(p.t_s, p.position, p.quat_xyzw, w.t_s, w.force, w.torque)
+    noisier = [replay(renoised(evaluation, levels, rng)) for _ in range(draws)]
+
+    def rise(name: str) -> float:
+        return float(np.sqrt(max(np.mean([getattr(f, name) ** 2 for f in noisier]) - getattr(fit, name) ** 2, 0.0)))
+
+    return {"rmse_position_m": rise("rmse_position_m"), "rmse_rotation_rad": rise("rmse_rotation_rad"),
+            "draws": draws, "noise_levels": vars(levels)}
 
 
 @dataclass(frozen=True)
@@ -375,6 +402,9 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
         e.evidence.update({"heldout_rmse_position_before_m": fit_before.rmse_position_m,
                            "heldout_rmse_position_after_m": fit_after.rmse_position_m})
 
+    floor = noise_floor(evaluation, lambda r: replay_held(r, X_tracked_body, after_inertial, effect, model.delay_s,
+                                                          config.window_s)[0], fit_after, rng)
+
     eval_rows_before = _rows(evaluation)
     eval_rows_after = _rows(evaluation, model.delay_s)
     stride = lib.stride
@@ -393,5 +423,5 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
         effects=tuple(effects), unexplained=left, screening=screening, scores=scores,
         fits={"before": fit_before, "after": fit_after}, residuals=residuals,
         findings=tuple(describe(residuals["before"])), inertial={"before": before_inertial, "after": after_inertial},
-        heldout=holdout is not None, traces=traces,
+        heldout=holdout is not None, traces=traces, noise_floor=floor,
     )

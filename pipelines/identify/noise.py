@@ -43,3 +43,21 @@ def estimate_noise_levels(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, w
         force_n=rms(force - lowpass(force, cutoff_hz, w_rate), w_keep),
         torque_nm=rms(torque - lowpass(torque, cutoff_hz, w_rate), w_keep),
     )
+
+
+def renoised(recording, levels: NoiseLevels, rng: np.random.Generator):
+    """`recording` (a `pipelines.logs.Recording`) with independent white noise of `levels` added once more to its
+    tracked poses (position per axis [m], rotation per axis [rad]) and its world-frame wrench (per axis [N],
+    [N m]): the same recording as a second, equally noisy set of sensors would have given. `wrench_raw` is left
+    as read."""
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    pose, wrench = recording.pose, recording.wrench
+    turn = Rotation.from_rotvec(levels.rotation_rad * rng.standard_normal((len(pose.t_s), 3)))
+    pose = replace(pose, position=pose.position + levels.position_m * rng.standard_normal(pose.position.shape),
+                   quat_xyzw=(turn * Rotation.from_quat(pose.quat_xyzw)).as_quat())
+    wrench = replace(wrench, force=wrench.force + levels.force_n * rng.standard_normal(wrench.force.shape),
+                     torque=wrench.torque + levels.torque_nm * rng.standard_normal(wrench.torque.shape))
+    return replace(recording, pose=pose, wrench=wrench)

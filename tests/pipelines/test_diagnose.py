@@ -61,10 +61,31 @@ def test_clean_recording_reports_nothing(tmp_path_factory):
     assert diagnosis.fits["after"] == diagnosis.fits["before"]
 
 
+def test_renoised_recording_reads_as_twice_the_noise(tmp_path_factory):
+    """Noise added at a recording's own estimated levels doubles its noise variance, which the diagnosis's noise
+    floor rests on; the recording itself is left as it was."""
+    from pipelines.identify.noise import estimate_noise_levels, renoised
+
+    def levels(r):
+        return vars(estimate_noise_levels(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s,
+                                          r.wrench.force, r.wrench.torque))
+
+    _, (trial, _, _, _) = _case(tmp_path_factory, None, 0.0, 11)
+    once = levels(trial)
+    position = trial.pose.position.copy()
+    twice = levels(renoised(trial, estimate_noise_levels(trial.pose.t_s, trial.pose.position, trial.pose.quat_xyzw,
+                                                         trial.wrench.t_s, trial.wrench.force, trial.wrench.torque),
+                            np.random.default_rng(3)))
+    for key, value in once.items():
+        assert twice[key] == pytest.approx(np.sqrt(2) * value, rel=0.1), key
+    np.testing.assert_array_equal(trial.pose.position, position)
+
+
 @pytest.mark.parametrize("name, key", [("sensor_bias", "force"), ("viscous_damping", "b")])
 def test_concealed_effect_named_and_quantified(tmp_path_factory, name, key):
     """A concealed effect 3x the noise is named first, its main parameter within 15 % and within three of its
-    reported standard deviations per component, and the held-out position error and the wrench residual fall."""
+    reported standard deviations per component, and the held-out position error and the wrench residual fall
+    to about the true model's, whose error the estimated noise floor matches."""
     effect, (trial, holdout, prior, X_tracked_body) = _case(tmp_path_factory, name, 3.0, 5)
     diagnosis = diagnose_held([trial], holdout, X_tracked_body, prior, CONFIG)
     top = diagnosis.effects[0]
@@ -81,6 +102,8 @@ def test_concealed_effect_named_and_quantified(tmp_path_factory, name, key):
     truth = true_model_fit(Case("cube", effect, 3.0, 5), holdout, X_tracked_body, prior, CONFIG.window_s)
     assert truth.rmse_position_m < diagnosis.fits["before"].rmse_position_m
     assert diagnosis.fits["after"].rmse_position_m == pytest.approx(truth.rmse_position_m, rel=0.15)
+    # what the true model still leaves is the sensors' noise, which the diagnosis estimates without the truth
+    assert diagnosis.noise_floor["rmse_position_m"] == pytest.approx(truth.rmse_position_m, rel=0.3)
 
 
 def test_concealed_effect_rejects_unknown_name():
