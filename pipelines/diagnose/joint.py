@@ -34,7 +34,7 @@ from pipelines.identify.jointed import (
 
 from .residuals import analyse_joint_residual, describe, unexplained
 from .screening import Library, fit_subset, screen
-from .select import DiagnoseConfig, Diagnosis, noise_floor, predicts_better
+from .select import DiagnoseConfig, Diagnosis, predicts_better
 
 JOINT_CANDIDATES = tuple(JOINT_EFFECT_PARAMS)
 """Joint candidates in screening order."""
@@ -210,9 +210,6 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
         _, q_before, windows, base_fit = fitted(())
         _, q_after, _, final = fitted(best) if best else (None, q_before, windows, base_fit)
     fits = {"before": replay_fit(joint, q_before, windows), "after": replay_fit(joint, q_after, windows)}
-    chosen_body = joint_body(joint, placement, prior, jconfig, best)
-    floor = noise_floor(evaluation, lambda r: replay_fit(joint, *replay_jointed(
-        r, joint, placement, prior, chosen_body, final.values, jconfig)[1:]), fits["after"], rng)
 
     effects = []
     for name in sorted(best, key=lambda c: refits[(c,)]["mse"].sum()):
@@ -251,6 +248,6 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
         fits=fits,
         residuals=residuals, findings=tuple(describe(residuals["before"])),
         inertial={"before": base_fit.inertial, "after": final.inertial},
-        heldout=holdout is not None, traces=traces, noise_floor=floor,
+        heldout=holdout is not None, traces=traces,
     )
     return diagnosis, final if best else None

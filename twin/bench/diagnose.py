@@ -314,12 +314,14 @@ def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0
                "all_found": [e.name for e in diagnosis.effects], "main_error_pct": error, "main_std_pct": std,
                "rmse_before_m": diagnosis.fits["before"].rmse_position_m,
                "rmse_after_m": diagnosis.fits["after"].rmse_position_m, "rmse_true_m": true_fit.rmse_position_m,
-               "floor_m": diagnosis.noise_floor["rmse_position_m"], "seconds": time.perf_counter() - t0}
+               "floor_m": diagnosis.noise_floor["rmse_position_m"] if diagnosis.noise_floor else None,
+               "seconds": time.perf_counter() - t0}
         rows.append(row)
+        floor = '' if row['floor_m'] is None else f"{1000 * row['floor_m']:.3f}"
         print(f"{k:>3} {case.shape:<12} {truth or 'none':<18} {case.ratio:>6.2f} {row['found'] or 'none':<18} "
               f"{'' if error is None else f'{error:.1f}':>10} {'' if std is None else f'{std:.1f}':>6} "
               f"{1000 * row['rmse_before_m']:>14.3f} "
-              f"{1000 * row['rmse_after_m']:>9.3f} {1000 * row['rmse_true_m']:>9.3f} {1000 * row['floor_m']:>9.3f} "
+              f"{1000 * row['rmse_after_m']:>9.3f} {1000 * row['rmse_true_m']:>9.3f} {floor:>9} "
               f"{row['seconds']:>5.1f}",
               flush=True)
     _summary(rows)
@@ -365,12 +367,13 @@ def _summary(rows: list[dict]) -> None:
         print(f"  error above the true model's, sqrt(rmse^2 - truth^2), at least halved: "
               f"{sum(after <= 0.5 * before for before, after in excess)}/{len(excess)}")
     # the same question without the truth: the floor the diagnosis estimates by re-noising the held-out recording
-    possible = [r for r in reported if r["rmse_before_m"] >= 2 * r["floor_m"]]
-    print(f"  error before at least twice the estimated noise floor in {len(possible)}/{len(reported)}; ours halves "
-          f"it in {sum(r in halved for r in possible)} of those {len(possible)}")
-    floors = [r["floor_m"] / r["rmse_true_m"] for r in rows]
+    with_floor = [r for r in reported if r["floor_m"] is not None]  # held bodies
+    possible = [r for r in with_floor if r["rmse_before_m"] >= 2 * r["floor_m"]]
+    print(f"  error before at least twice the estimated noise floor in {len(possible)}/{len(with_floor)} (free); "
+          f"ours halves it in {sum(r in halved for r in possible)} of those {len(possible)}")
+    floors = [r["floor_m"] / r["rmse_true_m"] for r in rows if r["floor_m"] is not None]
     if floors:
-        print(f"estimated noise floor / the true model's error, all rows: median {np.median(floors):.2f}, "
+        print(f"estimated noise floor / the true model's error, free rows: median {np.median(floors):.2f}, "
               f"range {min(floors):.2f}-{max(floors):.2f}")
 
 
