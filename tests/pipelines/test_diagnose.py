@@ -67,17 +67,15 @@ def test_renoised_recording_reads_as_twice_the_noise(tmp_path_factory):
     from pipelines.identify.noise import estimate_noise_levels, renoised
 
     def levels(r):
-        return vars(estimate_noise_levels(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s,
-                                          r.wrench.force, r.wrench.torque))
+        return estimate_noise_levels(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s, r.wrench.force,
+                                     r.wrench.torque)
 
     _, (trial, _, _, _) = _case(tmp_path_factory, None, 0.0, 11)
     once = levels(trial)
     position = trial.pose.position.copy()
-    twice = levels(renoised(trial, estimate_noise_levels(trial.pose.t_s, trial.pose.position, trial.pose.quat_xyzw,
-                                                         trial.wrench.t_s, trial.wrench.force, trial.wrench.torque),
-                            np.random.default_rng(3)))
-    for key, value in once.items():
-        assert twice[key] == pytest.approx(np.sqrt(2) * value, rel=0.1), key
+    twice = levels(renoised(trial, once, np.random.default_rng(3)))
+    for key, value in vars(once).items():
+        assert getattr(twice, key) == pytest.approx(np.sqrt(2) * value, rel=0.1), key
     np.testing.assert_array_equal(trial.pose.position, position)
 
 
