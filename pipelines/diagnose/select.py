@@ -28,7 +28,7 @@ from assets import Effect, FitMetrics, Inertial, Pose
 from pipelines.identify.free_body import IdentifyConfig
 from pipelines.identify.inertia import nearest_physical_inertia, theta_from_physical
 from pipelines.identify.least_squares import NewtonEulerRows, newton_euler_rows, object_frame_from_pi
-from pipelines.identify.noise import estimate_noise_levels, renoised
+from pipelines.identify.noise import recording_noise_levels, renoised
 from pipelines.identify.rollout import FreeBodyRollout
 from pipelines.identify.windows import concat_windows, make_windows
 
@@ -113,15 +113,14 @@ def noise_floor(evaluation, replay, fit: FitMetrics, rng: np.random.Generator, d
     """How much of `fit`, the chosen model's replay error on `evaluation`, the sensors' noise alone accounts for.
 
     `replay` maps a Recording to the FitMetrics of that model's replay of it. The noise levels are estimated from
-    `evaluation` itself (`estimate_noise_levels`) and the same amount again added to it (`renoised`), `draws`
+    `evaluation` itself (`recording_noise_levels`) and the same amount again added to it (`renoised`), `draws`
     times: noise independent of the model's own error adds in squares, so the squared errors rise by what the
     recording's own noise contributes, whatever the model. An error before that is under twice this floor
     cannot be halved by any model of the recording.
 
     Returns rmse_position_m and rmse_rotation_rad [m, rad] of the floor, and the noise levels used.
     """
-    p, w = evaluation.pose, evaluation.wrench
-    levels = estimate_noise_levels(p.t_s, p.position, p.quat_xyzw, w.t_s, w.force, w.torque)
+    levels = recording_noise_levels(evaluation)
     noisier = [replay(renoised(evaluation, levels, rng)) for _ in range(draws)]
 
     def rise(name: str) -> float:

@@ -70,10 +70,10 @@ def tracked_to_object(recording, placement: Pose) -> Pose:
     """
     from scipy.spatial.transform import Rotation
 
-    from .noise import estimate_noise_levels
+    from .noise import recording_noise_levels
 
-    pose, wrench = recording.pose, recording.wrench
-    noise = estimate_noise_levels(pose.t_s, pose.position, pose.quat_xyzw, wrench.t_s, wrench.force, wrench.torque)
+    pose = recording.pose
+    noise = recording_noise_levels(recording)
     n = max(1, int(np.sum(pose.t_s <= pose.t_s[0] + 0.1)))
     running = np.cumsum(np.vstack([np.zeros(3), pose.position]), axis=0)
     running = (running[n:] - running[:-n]) / n  # mean of samples i .. i+n-1

@@ -224,15 +224,14 @@ def detect_kind(recording, kind: str | None = None, max_samples: int = 400) -> K
     every candidate is still reported. max_samples: the track is thinned evenly
     to at most this many poses for the fit (noise levels use all of them).
     """
-    from .noise import estimate_noise_levels
+    from .noise import recording_noise_levels
 
     if kind is not None and kind not in KINDS:
         raise ValueError(f"--kind: expected one of {KINDS}, got {kind!r}")
     pose = recording.pose
     if len(pose.t_s) < 20:
         raise ValueError(f"{recording.path}: {len(pose.t_s)} pose samples; need at least 20 to tell the kind of motion")
-    w = recording.wrench
-    noise = estimate_noise_levels(pose.t_s, pose.position, pose.quat_xyzw, w.t_s, w.force, w.torque)
+    noise = recording_noise_levels(recording)
     sp, sr = max(noise.position_m, 1e-6), max(noise.rotation_rad, 1e-6)
     step = max(1, int(np.ceil(len(pose.t_s) / max_samples)))
     t_s, position = pose.t_s[::step], pose.position[::step]

@@ -64,16 +64,12 @@ def test_clean_recording_reports_nothing(tmp_path_factory):
 def test_renoised_recording_reads_as_twice_the_noise(tmp_path_factory):
     """Noise added at a recording's own estimated levels doubles its noise variance, which the diagnosis's noise
     floor rests on; the recording itself is left as it was."""
-    from pipelines.identify.noise import estimate_noise_levels, renoised
-
-    def levels(r):
-        return estimate_noise_levels(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s, r.wrench.force,
-                                     r.wrench.torque)
+    from pipelines.identify.noise import recording_noise_levels, renoised
 
     _, (trial, _, _, _) = _case(tmp_path_factory, None, 0.0, 11)
-    once = levels(trial)
+    once = recording_noise_levels(trial)
     position = trial.pose.position.copy()
-    twice = levels(renoised(trial, once, np.random.default_rng(3)))
+    twice = recording_noise_levels(renoised(trial, once, np.random.default_rng(3)))
     for key, value in vars(once).items():
         assert getattr(twice, key) == pytest.approx(np.sqrt(2) * value, rel=0.1), key
     np.testing.assert_array_equal(trial.pose.position, position)

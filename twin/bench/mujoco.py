@@ -271,7 +271,7 @@ def sysid_held(recording, X_tracked_body, prior, bounds, config: SysidConfig = S
     from mujoco import sysid
 
     from assets import Inertial
-    from pipelines.identify.noise import estimate_noise_levels
+    from pipelines.identify.noise import recording_noise_levels
 
     t0 = time.perf_counter()
     spec = held_spec(in_frame(prior, X_tracked_body), config)
@@ -279,9 +279,7 @@ def sysid_held(recording, X_tracked_body, prior, bounds, config: SysidConfig = S
     initial, controls, sensors, spec.option.timestep = _chunks(recording, model, config)
     params = sysid.ParameterDict()
     params.add(pseudo_inertia_parameter(spec, prior, bounds))
-    r = recording
-    noise = estimate_noise_levels(r.pose.t_s, r.pose.position, r.pose.quat_xyzw, r.wrench.t_s, r.wrench.force,
-                                  r.wrench.torque)
+    noise = recording_noise_levels(recording)
     sequences = sysid.ModelSequences("held", spec, [f"chunk{i}" for i in range(len(initial))], initial, controls,
                                      sensors)
     # floors keep a noise-free recording finite (1 um and 10 urad: the tracker's ratio, 0.1 m per rad)
