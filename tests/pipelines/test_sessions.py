@@ -69,3 +69,43 @@ def test_registration_recovers_the_pose_change(two_sessions, merged):
     centre = truth.center_mass
     assert np.linalg.norm(error[:3, :3] @ centre + error[:3, 3] - centre) < 1.5e-3
     assert registration["fitness"] >= 0.9 and registration["rmse_m"] < 1.5e-3
+
+
+def _resting_bridge_side(underside_normal_up: float):
+    """The bridge's own surface as if every point of it had been seen, cut 2 mm up like a session's table."""
+    from pipelines.reconstruct import Reconstruction
+    from pipelines.sessions import _Side
+
+    mesh = _bridge()
+    mesh.apply_translation((0.0, 0.0, -mesh.bounds[0, 2]))
+    mesh = mesh.subdivide_to_size(2e-3)
+    rec = Reconstruction(mesh=mesh, support_plane=(np.array([0.0, 0.0, 1.0]), 0.0), object_points_count=0,
+                         voxel_size_m=1e-3, observed_points=mesh.sample(20000, seed=0),
+                         stats={"cut_height_m": 2e-3})
+    return _Side.of(rec, underside_normal_up)
+
+
+def test_undersides_facing_the_table_are_not_taken_as_observed():
+    """The overhangs' undersides (2 cm over the table, facing it) are only seen through the gap: left out at
+    the default, kept when the limit lets every direction in."""
+    from pipelines.sessions import SessionsConfig
+
+    every = _resting_bridge_side(-1.01)
+    default = _resting_bridge_side(SessionsConfig().underside_normal_up)
+    assert np.sum(every.normals[:, 2] < -0.9) > 50
+    assert np.all(default.normals[:, 2] >= SessionsConfig().underside_normal_up)
+    assert len(default.points) < len(every.points)
+
+
+def test_points_in_the_cut_band_may_lie_outside_the_extruded_solid():
+    """Below the other session's cut (plus a voxel: 3 mm here) its solid is an extrusion, so a point outside it
+    there costs nothing; the same point 5 mm up, under the overhang, counts its distance to the block."""
+    from dataclasses import replace
+
+    side = _resting_bridge_side(-0.5)
+    beside = replace(side, points=np.array([[0.01, 0.0, 0.001], [0.01, 0.0, 0.005]]),
+                     normals=np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
+    residual, on_surface, gradient = beside.distances_to(side, np.eye(3), np.zeros(3), np.arange(2), 0.5)
+    assert not on_surface[0]
+    assert residual[0] == 0.0 and not gradient[0].any()
+    assert residual[1] == pytest.approx(0.01, abs=2e-4)  # under the overhang, 1 cm beside the block
