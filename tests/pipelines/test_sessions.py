@@ -74,7 +74,7 @@ def test_registration_recovers_the_pose_change(two_sessions, merged):
 def _resting_bridge_side(underside_normal_up: float):
     """The bridge's own surface as if every point of it had been seen, cut 2 mm up like a session's table."""
     from pipelines.reconstruct import Reconstruction
-    from pipelines.sessions import _Side
+    from pipelines.sessions import SessionsConfig, _Side
 
     mesh = _bridge()
     mesh.apply_translation((0.0, 0.0, -mesh.bounds[0, 2]))
@@ -82,7 +82,7 @@ def _resting_bridge_side(underside_normal_up: float):
     rec = Reconstruction(mesh=mesh, support_plane=(np.array([0.0, 0.0, 1.0]), 0.0), object_points_count=0,
                          voxel_size_m=1e-3, observed_points=mesh.sample(20000, seed=0),
                          stats={"cut_height_m": 2e-3})
-    return _Side.of(rec, underside_normal_up)
+    return _Side.of(rec, SessionsConfig(underside_normal_up=underside_normal_up))
 
 
 def test_undersides_facing_the_table_are_not_taken_as_observed():
@@ -109,3 +109,17 @@ def test_points_in_the_cut_band_may_lie_outside_the_extruded_solid():
     assert not on_surface[0]
     assert residual[0] == 0.0 and not gradient[0].any()
     assert residual[1] == pytest.approx(0.01, abs=2e-4)  # under the overhang, 1 cm beside the block
+
+
+def test_smoothing_along_normals_flattens_bumps_without_shrinking_the_outline():
+    """Points on a 10 cm square with 0.5 mm of noise along its normal: smoothed over 3 mm, the noise drops
+    below a third and no point moves sideways; radius 0 leaves them as they are."""
+    from pipelines.sessions import _smoothed_along_normals
+
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(-0.05, 0.05, (4000, 2)), rng.normal(0.0, 5e-4, 4000)])
+    normals = np.tile([0.0, 0.0, 1.0], (4000, 1))
+    smoothed = _smoothed_along_normals(points, normals, 3e-3)
+    assert np.std(smoothed[:, 2]) < np.std(points[:, 2]) / 3
+    np.testing.assert_array_equal(smoothed[:, :2], points[:, :2])
+    np.testing.assert_array_equal(_smoothed_along_normals(points, normals, 0.0), points)
