@@ -20,11 +20,13 @@ Method:
    observed and faces the same way, an observed point lies on it (its signed
    distance); anywhere else it lies inside that solid (the positive part of the
    signed distance), except within the other's cut band, where that solid is
-   an extrusion rather than a bound. The two directions together pin the pose even when the
-   sessions saw little surface in common (a flat tool turned over shares only
-   its rim). Each session's object rested on its support plane, so that plane,
-   carried into the other's world, touches the other's observed surface where
-   the object stood: those contacts are held on it, which pins a flat tool's
+   an extrusion rather than a bound. The two directions together pin the pose
+   even when the sessions saw little surface in common (a flat tool turned over
+   shares only its rim). Each session's object rested on its support plane, so
+   that plane, carried into the other's world, touches the other's observed
+   surface where the object stood (a face of its convex hull, taken on that
+   surface smoothed over the depth noise so that noise bumps do not stand in
+   for the contact): those contacts are held on it, which pins a flat tool's
    pitch. Starts: the four proper alignments of the solids' principal axes,
    plus seeded random rotations when two principal moments are close; each
    refined briefly (Levenberg-Marquardt, soft-L1 loss) on a subsample, the
