@@ -422,24 +422,28 @@ def _object_mesh(config: BuildConfig):
     """The watertight object mesh in world at its placement, its name, a material hint, stats."""
     import trimesh
 
-    from pipelines.reconstruct import reconstruct
+    from pipelines.reconstruct import ReconstructConfig, reconstruct
     from pipelines.scan import read_scan
 
     source = Path(config.source)
     if config.scans:
-        from pipelines.sessions import merge_sessions
+        from pipelines.sessions import SessionsConfig, merge_sessions
 
         for path in (source, *config.scans):
             if not Path(path).is_dir():
                 raise BuildError(f"{path}: --scan needs scan directories (SOURCE and each --scan), not a mesh file")
         scans = [read_scan(p) for p in (source, *config.scans)]
-        rec = merge_sessions(scans)
-        stats = {"frames": sum(len(s.frames) for s in scans), "voxel_size_m": rec.voxel_size_m, **rec.stats}
+        sessions_config = SessionsConfig()
+        rec = merge_sessions(scans, sessions_config)
+        stats = {"config": asdict(sessions_config), "frames": sum(len(s.frames) for s in scans),
+                 "voxel_size_m": rec.voxel_size_m, **rec.stats}
         return rec.mesh, scans[0].name, scans[0].material_hint, stats
     if source.is_dir():
         scan = read_scan(source)
-        rec = reconstruct(scan)
-        stats = {"frames": len(scan.frames), "voxel_size_m": rec.voxel_size_m, **rec.stats}
+        reconstruct_config = ReconstructConfig()
+        rec = reconstruct(scan, reconstruct_config)
+        stats = {"config": asdict(reconstruct_config), "frames": len(scan.frames), "voxel_size_m": rec.voxel_size_m,
+                 **rec.stats}
         return rec.mesh, scan.name, scan.material_hint, stats
     if source.suffix.lower() in MESH_SUFFIXES and source.is_file():
         try:

@@ -39,6 +39,7 @@ def test_build_writes_every_file(built):
     assert set(asset["theta"]) == {"mass", "com", "inertia", "friction"}
     assert asset["fit"]["final"]["rmse_position_m"] < asset["fit"]["baseline"]["rmse_position_m"]
     assert all(check["ok"] for check in asset["provenance"]["validation"]["checks"])
+    assert asset["provenance"]["scan"]["config"]["voxel_budget"] > 0  # the reconstruction's settings, as used
     assert "<img" in (built / "report.html").read_text()
 
 
