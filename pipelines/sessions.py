@@ -323,13 +323,13 @@ class _Side:
         normal, offset = rec.support_plane
         height = mesh.vertices @ normal + offset
         extruded = rec.stats.get("cut_height_m", 0.0) + rec.voxel_size_m
-        near = ((distance <= radius) & (height > extruded)
-                & (np.asarray(mesh.vertex_normals) @ normal >= config.underside_normal_up))
+        vertex_normals = np.asarray(mesh.vertex_normals)
+        near = (distance <= radius) & (height > extruded) & (vertex_normals @ normal >= config.underside_normal_up)
         scene = o3d.t.geometry.RaycastingScene()
         scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
                             o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
         points = np.asarray(mesh.vertices)[near]
-        normals = np.asarray(mesh.vertex_normals)[near]
+        normals = vertex_normals[near]
         smoothed = _smoothed_along_normals(points, normals, config.contact_smoothing_sigmas
                                            * rec.stats.get("depth_noise_m", 0.0))
         hull = ConvexHull(smoothed) if len(points) >= 4 else None
