@@ -354,8 +354,9 @@ class _Side:
         """Residuals [m] of this side's observed points `index`, moved by (R, t), against `other`'s solid.
 
         Returns the residuals (signed distance where the nearest surface was observed by `other` and faces the
-        same way, else its positive part), which points took the signed distance, and each residual's gradient
-        with respect to the moved point (the nearest face's normal; zero where the residual is clipped).
+        same way, else its positive part, and 0 within `other`'s cut band), which points took the signed
+        distance, and each residual's gradient with respect to the moved point (the nearest face's normal; zero
+        where the residual is clipped).
         """
         import open3d as o3d
 
