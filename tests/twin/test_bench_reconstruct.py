@@ -8,7 +8,7 @@ import trimesh
 
 from twin.bench.reconstruct import (
     _chamfer,
-    _hidden_space_pct,
+    _hidden_space,
     _plane_depth_errors,
     _rest,
     _summarise,
@@ -62,17 +62,20 @@ def test_hidden_space_is_what_no_camera_sees():
     post.apply_translation((0.0, 0.0, 0.005))
     mushroom = trimesh.boolean.union([slab, post], engine="manifold")
     above = [_camera_above(0.0, 0.0, 0.4), _camera_above(0.05, 0.0, 0.4)]
-    assert _hidden_space_pct(mushroom, above, cells=80) == pytest.approx(100 * 15 / 17, abs=3.0)
+    hidden = _hidden_space(mushroom, above, cells=80)
+    assert hidden["hidden_pct"] == pytest.approx(100 * 15 / 17, abs=3.0)
+    # filled, it makes a 40 x 40 x 20 mm box: the COM drops from (16 x 15 + 1 x 5) / 17 = 14.4 to 10 mm up
+    assert hidden["hidden_com_shift_mm"] == pytest.approx((16 * 15 + 5) / 17 - 10.0, abs=0.1)
 
     side = _camera_above(0.0, 0.0, 0.4)  # then turned to look along +x from low at the side
     side.T_world_camera[:3, :3] = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
     side.T_world_camera[:3, 3] = (-0.3, 0.0, 0.005)
     # it sees all but the post's shadow, 15 x 10 x 10 mm behind it
-    assert _hidden_space_pct(mushroom, above + [side], cells=80) == pytest.approx(100 * 1.5 / 17, abs=1.5)
+    assert _hidden_space(mushroom, above + [side], cells=80)["hidden_pct"] == pytest.approx(100 * 1.5 / 17, abs=1.5)
 
     box = trimesh.creation.box((0.04, 0.04, 0.02))
     box.apply_translation((0.0, 0.0, 0.01))
-    assert _hidden_space_pct(box, above, cells=80) == pytest.approx(0.0, abs=0.5)
+    assert _hidden_space(box, above, cells=80) == pytest.approx({"hidden_pct": 0.0, "hidden_com_shift_mm": 0.0}, abs=0.05)
 
 
 def test_rest_puts_a_box_flat_on_the_table():
@@ -89,7 +92,7 @@ def test_summary_splits_by_size_and_counts_targets():
         {"object": "a", "family": "primitive", "size_m": 0.10, "noise": "low", "volume_error_pct": 1.0, "chamfer_mm": 0.2, "com_shift_mm": 0.1,
          "tsdf_ms_per_frame": 20.0, "decompose_s": 5.0},
         {"object": "b", "family": "workshop-tools", "size_m": 0.30, "noise": "low", "volume_error_pct": -5.0, "chamfer_mm": 0.5, "com_shift_mm": 2.0,
-         "tsdf_ms_per_frame": 30.0, "hidden_pct": 4.0},
+         "tsdf_ms_per_frame": 30.0, "hidden_pct": 4.0, "hidden_com_shift_mm": 1.0},
         {"object": "c", "size_m": 0.03, "noise": "low", "volume_error_pct": 9.0, "chamfer_mm": 0.1, "com_shift_mm": 0.1,
          "tsdf_ms_per_frame": 25.0},
     ]
@@ -101,7 +104,7 @@ def test_summary_splits_by_size_and_counts_targets():
     assert summary["tsdf_ms_per_frame"]["max"] == 30.0 and summary["decompose_s"]["median"] == 5.0
     assert summary["size >= 5 cm, workshop tools, low noise"]["objects"] == 1
     assert summary["size >= 5 cm, primitives and MIT push shapes, low noise"]["volume_error_pct"]["max"] == 1.0
-    assert summary["hidden_over_volume_target_pct"] == {"b": 4.0}
+    assert summary["hidden_over_target"] == {"b": {"volume_pct": 4.0, "com_shift_mm": 1.0}}
 
 
 def test_unknown_object_name_is_refused_with_the_choices(tmp_path):
