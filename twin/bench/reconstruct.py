@@ -406,9 +406,11 @@ def _hidden_space(truth, frames, cells: int = 300, min_cell_m: float = 0.0005) -
         rays = np.hstack([np.broadcast_to(T[:3, 3], direction.shape), direction / distance[:, None]])
         hit = blockers.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy()
         seen[todo[hit >= distance - 1e-5]] = True
-    hidden_m3 = float((~seen).sum()) * cell**3
-    filled_com = (truth.volume * truth.center_mass + hidden_m3 * points[~seen].mean(axis=0)) / (truth.volume + hidden_m3) \
-        if hidden_m3 > 0 else truth.center_mass
+    hidden = points[~seen]
+    hidden_m3 = len(hidden) * cell**3
+    filled_com = truth.center_mass
+    if len(hidden):
+        filled_com = (truth.volume * truth.center_mass + hidden_m3 * hidden.mean(axis=0)) / (truth.volume + hidden_m3)
     return {"hidden_pct": 100.0 * hidden_m3 / float(truth.volume),
             "hidden_com_shift_mm": 1000.0 * float(np.linalg.norm(filled_com - truth.center_mass))}
 
