@@ -133,3 +133,19 @@ def test_silhouette_pixels_are_left_out_of_the_fusion_on_both_sides_only():
     assert dropped.sum() - (2 * 60 + 1) < 0.005 * depth.size
     np.testing.assert_array_equal(out[~dropped], depth[~dropped])
     np.testing.assert_array_equal(_silhouettes_dropped(depth, 0.0), depth)
+
+
+def test_a_band_two_noise_sigmas_wide_leaves_the_wedges_under_a_hex_bar_open(tmp_path):
+    """A hex bar lying on a face (6.9 mm across flats, 12 cm long) has a wedge 2 mm deep between the table and
+    each lower face. At the real sensors' noise (smooth, 2 mm at 0.4 m) a truncation band three sigmas wide
+    averages the wedges away (+11 % volume); the default two leaves them within 5 % (+2.8 %)."""
+    bar = trimesh.creation.cylinder(radius=0.004, height=0.12, sections=6)
+    bar.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (0, 1, 0)))  # its axis along x
+    down = bar.face_normals[np.argmin(bar.face_normals[:, 2])]
+    bar.apply_transform(trimesh.transformations.rotation_matrix(np.arctan2(down[1], -down[2]), (1, 0, 0)))
+    bar.apply_translation((0.3 - bar.centroid[0], -0.1 - bar.centroid[1], -bar.bounds[0, 2]))
+    sensor = RenderConfig(depth_noise_base_m=1.26e-3, depth_noise_quadratic_per_m=2.93e-3, depth_noise_smoothing_px=8.0)
+    scan = read_scan(render_scan(bar, tmp_path, sensor, np.random.default_rng(3), "hex bar"))
+    default = reconstruct(scan).mesh.volume / bar.volume - 1
+    wide = reconstruct(scan, ReconstructConfig(noise_trunc_sigmas=3.0)).mesh.volume / bar.volume - 1
+    assert abs(default) < 0.05 and wide > 0.08
