@@ -75,12 +75,13 @@ class SessionsConfig:
     """Settings for every session's own reconstruction. Silhouette pixels are left out of the fusion: each
     erodes the surface by about 0.05 mm, which the intersection keeps wherever either session did (a 5 mm
     bar, intersected at the exact pose: -3.4 % with them, -1.8 % without). For the same reason the
-    truncation band stays three noise sigmas wide rather than one session's two, while the other session
-    carves the concave corners a wide band fills (the six workshop tools at three noise levels: 16/18 within
-    volume and COM at three sigmas, 11/18 at two, every volume 0.8-4.9 % lower). The table is cut 1.5 voxels up,
-    as for one session: a higher cut gives more of a thin part over to the extrusion of a cross-section, and
-    with the other session's cut band little of it is left seen (a wrench's 8.5 mm handle at high noise,
-    1.5 mm voxels: intersected at the exact pose, COM 2.70 mm cut at 3 voxels, 1.53 mm at 1.5)."""
+    truncation band stays three noise sigmas wide, not one session's two: a narrower band erodes each
+    session a little and the intersection keeps it, while the concave corners a wide band fills are carved by
+    the other session (the six workshop tools at three noise levels: 16/18 within volume and COM at three
+    sigmas, 11/18 at two, every volume 0.8-4.9 % lower). The table is cut 1.5 voxels up, as for one session:
+    a higher cut gives more of a thin part over to the extrusion of a cross-section, and with the other
+    session's cut band little of it is left seen (a wrench's 8.5 mm handle at high noise, 1.5 mm voxels:
+    intersected at the exact pose, COM 2.70 mm cut at 3 voxels, 1.53 mm at 1.5)."""
     points: int = 3000
     """Observed points per session in the final refinement."""
     screen_points: int = 400
