@@ -85,14 +85,15 @@ class ReconstructConfig:
     Voxels up to this far behind an observed surface count as inside, so a wide band fills the unseen
     wedge under a round part resting on the table (a hammer lying flat: +14 % volume at 5 voxels of
     2.2 mm, +4.4 % at 3 voxels of 1 mm)."""
-    noise_trunc_sigmas: float = 2.0
+    noise_trunc_sigmas: float = 1.75
     """The truncation is at least this many standard deviations of the depth noise, measured on the
     support plane (median absolute residual along the rays). A band narrower than the noise erodes
     the surface: a 3 cm cube under 2 mm noise lost 8.7 % of its volume at 5 voxels of 0.5 mm (1.25 sigmas),
-    0.3 % at 10. A wider one fills concave corners narrower than itself: a hex key lying on a face has a
-    1.7 mm wedge between the table and each lower face, and at the real sensors' noise it came out +7.7 %
-    at 3 sigmas, +2.3 % at 2 (a screwdriver +4.8 and +0.1 %), while primitives and push shapes of 5 cm and
-    more stayed within 1.6 % of their volume (within 1.0 % at 3 sigmas)."""
+    0.3 % at 10, and a screwdriver lost 4.7 % at 1.5 sigmas. A wider one fills concave corners narrower
+    than itself: a hex key lying on a face has a 1.7 mm wedge between the table and each lower face, and
+    at twice the real sensors' noise it came out +9.8 % at 3 sigmas, +3.2 % at 2 and +0.6 % at 1.75 (a
+    screwdriver +6.5, +0.5 and -1.7 %), while primitives and push shapes of 5 cm and more stayed within
+    2.1 % of their volume (within 1.0 % at 3 sigmas)."""
     depth_trunc_m: float = 3.0
     """Depth beyond this is ignored [m]."""
     silhouette_jump_truncations: float = 0.0

@@ -75,7 +75,7 @@ class SessionsConfig:
     """Settings for every session's own reconstruction. Silhouette pixels are left out of the fusion: each
     erodes the surface by about 0.05 mm, which the intersection keeps wherever either session did (a 5 mm
     bar, intersected at the exact pose: -3.4 % with them, -1.8 % without). For the same reason the
-    truncation band stays three noise sigmas wide, not one session's two: a narrower band erodes each
+    truncation band stays three noise sigmas wide, not one session's 1.75: a narrower band erodes each
     session a little and the intersection keeps it, while the concave corners a wide band fills are carved by
     the other session (the six workshop tools at three noise levels: 16/18 within volume and COM at three
     sigmas, 11/18 at two, every volume 0.8-4.9 % lower). The table is cut 1.5 voxels up, as for one session:
