@@ -91,7 +91,7 @@ class ReconstructConfig:
     the surface: a 3 cm cube under 2 mm noise lost 8.7 % of its volume at 5 voxels of 0.5 mm (1.25 sigmas),
     0.3 % at 10, and a screwdriver lost 4.7 % at 1.5 sigmas. A wider one fills concave corners narrower
     than itself: a hex key lying on a face has a 1.7 mm wedge between the table and each lower face, and
-    at twice the real sensors' noise it came out +9.8 % at 3 sigmas, +3.2 % at 2 and +0.6 % at 1.75 (a
+    under 2.2 mm of depth noise at 0.4 m it came out +9.8 % at 3 sigmas, +3.2 % at 2 and +0.6 % at 1.75 (a
     screwdriver +6.5, +0.5 and -1.7 %), while primitives and push shapes of 5 cm and more stayed within
     2.1 % of their volume (within 1.0 % at 3 sigmas)."""
     depth_trunc_m: float = 3.0
