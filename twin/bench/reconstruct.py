@@ -192,10 +192,7 @@ def _watertight_from_mm(path: Path, cells: int = 300):
     lo, hi = lo - 4 * h, hi + 4 * h
     axes = [np.arange(a, b + h, h) for a, b in zip(lo, hi)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).astype(np.float32)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)), o3d.core.Tensor(np.asarray(mesh.faces, np.uint32))
-    )
+    scene = _raycasting_scene((mesh.vertices, mesh.faces))
     shell = scene.compute_distance(o3d.core.Tensor(grid)).numpy() < 0.5 * np.sqrt(3) * h
     labels, _ = ndimage.label(~shell)
     faces_of_box = [labels[0], labels[-1], labels[:, 0], labels[:, -1], labels[:, :, 0], labels[:, :, -1]]
@@ -377,22 +374,15 @@ def _hidden_space(truth, frames, cells: int = 300, min_cell_m: float = 0.0005) -
     """
     import open3d as o3d
 
-    def scene_of(*meshes):
-        scene = o3d.t.geometry.RaycastingScene()
-        for vertices, faces in meshes:
-            scene.add_triangles(o3d.core.Tensor(np.asarray(vertices, np.float32)),
-                                o3d.core.Tensor(np.asarray(faces, np.uint32)))
-        return scene
-
     lo, hi = truth.bounds
     cell = max(min_cell_m, float((hi - lo).max()) / cells)
     axes = [np.arange(a + cell / 2, b, cell) for a, b in zip(lo, hi)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3).astype(np.float32)
-    solid = scene_of((truth.vertices, truth.faces))
+    solid = _raycasting_scene((truth.vertices, truth.faces))
     points = grid[solid.compute_occupancy(o3d.core.Tensor(grid)).numpy() < 0.5]
     far = 100.0 * float((hi - lo).max()) + 10.0
     table = (np.array([[-far, -far, 0], [far, -far, 0], [far, far, 0], [-far, far, 0]]), np.array([[0, 1, 2], [0, 2, 3]]))
-    blockers = scene_of((truth.vertices, truth.faces), table)
+    blockers = _raycasting_scene((truth.vertices, truth.faces), table)
     seen = np.zeros(len(points), bool)
     for frame in frames:
         T, intr = np.asarray(frame.T_world_camera, np.float32), frame.intrinsics
@@ -415,6 +405,17 @@ def _hidden_space(truth, frames, cells: int = 300, min_cell_m: float = 0.0005) -
             "hidden_com_shift_mm": 1000.0 * float(np.linalg.norm(filled_com - truth.center_mass))}
 
 
+def _raycasting_scene(*meshes):
+    """Open3D raycasting scene of (vertices [m], faces) pairs."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    for vertices, faces in meshes:
+        scene.add_triangles(o3d.core.Tensor(np.asarray(vertices, np.float32)),
+                            o3d.core.Tensor(np.asarray(faces, np.uint32)))
+    return scene
+
+
 def _chamfer(a, b, count: int = 20000) -> float:
     """Symmetric Chamfer distance [m]: the mean of mean point-to-surface distances both ways."""
     import open3d as o3d
@@ -422,10 +423,7 @@ def _chamfer(a, b, count: int = 20000) -> float:
 
     def one_way(src, dst) -> float:
         points, _ = trimesh.sample.sample_surface(src, count, seed=1)
-        scene = o3d.t.geometry.RaycastingScene()
-        scene.add_triangles(
-            o3d.core.Tensor(np.asarray(dst.vertices, np.float32)), o3d.core.Tensor(np.asarray(dst.faces, np.uint32))
-        )
+        scene = _raycasting_scene((dst.vertices, dst.faces))
         return float(scene.compute_distance(o3d.core.Tensor(np.asarray(points, np.float32))).numpy().mean())
 
     return 0.5 * (one_way(a, b) + one_way(b, a))
