@@ -2,8 +2,10 @@
 
 Each writer takes an `assets.Asset` whose mesh files already lie under
 `out_dir` (paths in `asset.geometry` relative to it) and writes one file next
-to them, named after the asset. The body frame of every file is the object
-frame.
+to them, named after the asset: the file names and the names inside the files
+(bodies, links, joints, prims) are derived from `asset.name` by
+`exporters.names`, which writers and pipelines/validate.py share. The body frame
+of every file is the object frame.
 """
 
 from __future__ import annotations
@@ -14,10 +16,11 @@ from pathlib import Path
 from assets import Asset
 
 from .mjcf import export_mjcf
+from .names import FormatNames
 from .urdf import export_urdf
 from .usd import export_usd
 
-__all__ = ["ExportPaths", "export_all", "export_mjcf", "export_urdf", "export_usd"]
+__all__ = ["ExportPaths", "FormatNames", "export_all", "export_mjcf", "export_urdf", "export_usd"]
 
 
 @dataclass(frozen=True)
@@ -38,7 +41,7 @@ class ExportPaths:
 
 
 def export_all(asset: Asset, out_dir: Path) -> ExportPaths:
-    """Write NAME.urdf, NAME.xml and NAME.usda into `out_dir`."""
+    """Write NAME.urdf, NAME.xml and NAME.usda into `out_dir`, NAME `FormatNames.of(asset.name).file`."""
     return ExportPaths(
         urdf=export_urdf(asset, out_dir),
         mjcf=export_mjcf(asset, out_dir),

@@ -1,5 +1,7 @@
 """MJCF writer: the asset as a MuJoCo model file `NAME.xml`.
 
+NAME is `exporters.names.file_stem` of the asset's name; model, body and
+joint names derive from `mjcf_name`, and a comment keeps the name as written.
 The body frame is the object frame, placed at `asset.placement`: on a free
 joint, or for drawers and doors inside a fixed base body on `asset.joint`
 (q = 0 at the placement, passive damping, `frictionloss` for the joint's
@@ -17,6 +19,7 @@ import numpy as np
 
 from assets import Asset
 
+from .names import base_name, file_stem, joint_name, mjcf_name, xml_comment_text
 from .preconditions import exportable_inertial
 
 __all__ = ["export_mjcf"]
@@ -52,7 +55,8 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
             range or clashing mesh file stems.
     """
     out_dir = Path(out_dir)
-    path = out_dir / f"{asset.name}.xml"
+    path = out_dir / f"{file_stem(asset.name)}.xml"
+    body_name = mjcf_name(asset.name)
     mesh_paths = [asset.geometry.visual, *asset.geometry.collision, *filter(None, [asset.geometry.base])]
     names = [_mesh_name(p) for p in mesh_paths]
     if len(set(names)) != len(names):
@@ -66,7 +70,9 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
     mu = float(asset.theta.friction.value if asset.joint is None else asset.material.friction)
     x, y, z, w = asset.placement.quaternion_xyzw
 
-    root = ET.Element("mujoco", model=asset.name)
+    # Newton prefixes its labels with the model name ("model/worldbody/body"), so it is no free text either
+    root = ET.Element("mujoco", model=body_name)
+    root.append(ET.Comment(f" object name: {xml_comment_text(asset.name)} "))
     ET.SubElement(root, "compiler", angle="radian", meshdir=meshdir, autolimits="true")
     ET.SubElement(root, "option", gravity="0 0 -9.81")
     assets_el = ET.SubElement(root, "asset")
@@ -79,18 +85,18 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
         parent = world
     else:
         world.append(ET.Comment(" fixed base in world; the part at its scanned placement (q = 0) on its joint "))
-        parent = ET.SubElement(world, "body", name=f"{asset.name}_base")
+        parent = ET.SubElement(world, "body", name=base_name(body_name))
         if asset.geometry.base:
             ET.SubElement(parent, "geom", name=names[-1], type="mesh", mesh=names[-1],
                           friction=_num((mu, _TORSION_FRICTION, _ROLL_FRICTION)))
-    body = ET.SubElement(parent, "body", name=asset.name, pos=_num(asset.placement.position), quat=_num((w, x, y, z)))
+    body = ET.SubElement(parent, "body", name=body_name, pos=_num(asset.placement.position), quat=_num((w, x, y, z)))
     if asset.joint is None:
-        ET.SubElement(body, "freejoint", name=f"{asset.name}_free")
+        ET.SubElement(body, "freejoint", name=f"{body_name}_free")
     else:
         j = asset.joint
         R = asset.placement.rotation_matrix()
         ET.SubElement(
-            body, "joint", name=f"{asset.name}_joint", type="slide" if j.type == "prismatic" else "hinge",
+            body, "joint", name=joint_name(body_name), type="slide" if j.type == "prismatic" else "hinge",
             pos=_num(R.T @ (np.asarray(j.origin) - asset.placement.position)), axis=_num(R.T @ np.asarray(j.axis)),
             range=_num((j.lower, j.upper)), damping=repr(float(j.damping)),
             frictionloss=repr(float(asset.theta.friction.value)), stiffness=repr(float(j.stiffness)),
@@ -117,7 +123,7 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
 
     if asset.joint is not None and asset.geometry.base:
         # the joint guides the part through the base (a carcass around a drawer): they must not collide
-        ET.SubElement(ET.SubElement(root, "contact"), "exclude", body1=f"{asset.name}_base", body2=asset.name)
+        ET.SubElement(ET.SubElement(root, "contact"), "exclude", body1=base_name(body_name), body2=body_name)
     ET.indent(root, space="  ")
     out_dir.mkdir(parents=True, exist_ok=True)
     path.write_text(ET.tostring(root, encoding="unicode") + "\n")

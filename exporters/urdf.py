@@ -1,6 +1,8 @@
 """URDF writer: the asset as one link in `NAME.urdf` (or a base link and the part on its joint).
 
-The link frame is the object frame. A lone floating link has no joint to
+NAME is `exporters.names.file_stem` of the asset's name; robot, link and joint
+names derive from `urdf_name`, and a comment keeps the name as written. The
+link frame is the object frame. A lone floating link has no joint to
 carry `asset.placement`, so the link sits at the origin and the placement is
 recorded in a comment (and in asset.json). A drawer or door is a fixed base
 link in world and the part on a prismatic or revolute joint placed at the
@@ -20,6 +22,7 @@ import numpy as np
 
 from assets import Asset
 
+from .names import base_name, file_stem, joint_name, urdf_name, xml_comment_text
 from .preconditions import exportable_inertial
 
 __all__ = ["export_urdf"]
@@ -41,7 +44,7 @@ def _mesh_element(parent: ET.Element, tag: str, name: str, filename: str, offset
 def export_urdf(asset: Asset, out_dir: Path) -> Path:
     """Write `out_dir/NAME.urdf` for a rigid object, free or on a joint.
 
-    One link NAME: `<inertial>` with the COM [m] as origin (rpy 0), mass [kg]
+    One link, `urdf_name(asset.name)`: `<inertial>` with the COM [m] as origin (rpy 0), mass [kg]
     and the full tensor about the COM [kg m^2], object-frame axes; the visual
     mesh; one `<collision>` per convex part. Surface friction (unitless) has
     no standard tag and goes to both PyBullet's `<contact><lateral_friction>`
@@ -54,7 +57,8 @@ def export_urdf(asset: Asset, out_dir: Path) -> Path:
         ValueError: an unphysical inertia tensor, no collision parts or an empty joint range.
     """
     out_dir = Path(out_dir)
-    path = out_dir / f"{asset.name}.urdf"
+    path = out_dir / f"{file_stem(asset.name)}.urdf"
+    name = urdf_name(asset.name)
 
     inertial = exportable_inertial(asset, path, "export_urdf")
     I = inertial.inertia_matrix()
@@ -62,7 +66,8 @@ def export_urdf(asset: Asset, out_dir: Path) -> Path:
     mu = repr(float(asset.theta.friction.value if asset.joint is None else asset.material.friction))
     p, q = asset.placement.position, asset.placement.quaternion_xyzw
 
-    robot = ET.Element("robot", name=asset.name)
+    robot = ET.Element("robot", name=name)
+    robot.append(ET.Comment(f" object name: {xml_comment_text(asset.name)} "))
     offset = np.zeros(3)
     if asset.joint is None:
         robot.append(
@@ -73,8 +78,8 @@ def export_urdf(asset: Asset, out_dir: Path) -> Path:
             )
         )
     else:
-        offset = _write_base_and_joint(robot, asset)
-    link = ET.SubElement(robot, "link", name=asset.name)
+        offset = _write_base_and_joint(robot, asset, name)
+    link = ET.SubElement(robot, "link", name=name)
     inertial_el = ET.SubElement(link, "inertial")
     ET.SubElement(inertial_el, "origin", xyz=_num(np.asarray(inertial.com) + offset), rpy="0 0 0")
     ET.SubElement(inertial_el, "mass", value=repr(inertial.mass))
@@ -90,7 +95,7 @@ def export_urdf(asset: Asset, out_dir: Path) -> Path:
     contact = ET.SubElement(link, "contact")
     ET.SubElement(contact, "lateral_friction", value=mu)
 
-    gazebo = ET.SubElement(robot, "gazebo", reference=asset.name)
+    gazebo = ET.SubElement(robot, "gazebo", reference=name)
     ET.SubElement(gazebo, "mu1").text = mu
     ET.SubElement(gazebo, "mu2").text = mu
 
@@ -111,21 +116,22 @@ def urdf_link_offset(asset: Asset) -> np.ndarray:
     return asset.placement.rotation_matrix().T @ (p - on_axis)
 
 
-def _write_base_and_joint(robot: ET.Element, asset: Asset) -> np.ndarray:
-    """The fixed base link and the joint to the part; returns the object-frame origin in the part's link frame."""
+def _write_base_and_joint(robot: ET.Element, asset: Asset, name: str) -> np.ndarray:
+    """The fixed base link and the joint to the part (link `name`); returns the object-frame origin in the
+    part's link frame."""
     from scipy.spatial.transform import Rotation
 
     j = asset.joint
-    base = ET.SubElement(robot, "link", name=f"{asset.name}_base")
+    base = ET.SubElement(robot, "link", name=base_name(name))
     if asset.geometry.base:
         stem, rel = PurePosixPath(asset.geometry.base).stem, PurePosixPath(asset.geometry.base).as_posix()
         _mesh_element(base, "visual", stem, rel)
         _mesh_element(base, "collision", stem, rel)
     R = asset.placement.rotation_matrix()
     offset = urdf_link_offset(asset)
-    joint = ET.SubElement(robot, "joint", name=f"{asset.name}_joint", type=j.type)
-    ET.SubElement(joint, "parent", link=f"{asset.name}_base")
-    ET.SubElement(joint, "child", link=asset.name)
+    joint = ET.SubElement(robot, "joint", name=joint_name(name), type=j.type)
+    ET.SubElement(joint, "parent", link=base_name(name))
+    ET.SubElement(joint, "child", link=name)
     ET.SubElement(joint, "origin", xyz=_num(np.asarray(asset.placement.position) - R @ offset),
                   rpy=_num(Rotation.from_matrix(R).as_euler("xyz")))
     ET.SubElement(joint, "axis", xyz=_num(R.T @ np.asarray(j.axis)))
@@ -135,7 +141,7 @@ def _write_base_and_joint(robot: ET.Element, asset: Asset) -> np.ndarray:
     ET.SubElement(joint, "dynamics", damping=repr(float(j.damping)), friction=repr(float(asset.theta.friction.value)))
     if j.stiffness:
         # a joint spring has no URDF tag; Gazebo's URDF reader takes it from the joint's <gazebo> extension
-        gazebo = ET.SubElement(robot, "gazebo", reference=f"{asset.name}_joint")
+        gazebo = ET.SubElement(robot, "gazebo", reference=joint_name(name))
         ET.SubElement(gazebo, "springStiffness").text = repr(float(j.stiffness))
         ET.SubElement(gazebo, "springReference").text = repr(float(j.spring_ref))
     return offset

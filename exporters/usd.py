@@ -1,8 +1,10 @@
 """USD writer: the asset as a UsdPhysics rigid body in `NAME.usda`.
 
-Layout of the stage (upAxis Z, metersPerUnit 1, kilogramsPerUnit 1):
+NAME is `exporters.names.file_stem` of the asset's name, and PRIM its
+`usd_prim_name`; the body prim's `doc` and customData "twin:name" keep the name
+as written. Layout of the stage (upAxis Z, metersPerUnit 1, kilogramsPerUnit 1):
 
-    /NAME                      Xform at `placement`; RigidBodyAPI, MassAPI,
+    /PRIM                      Xform at `placement`; RigidBodyAPI, MassAPI,
                                NewtonMassAPI (`newton:inertia`), twin:* values
       visual                   Mesh (render purpose)
       collision/collision_NNN  Mesh, CollisionAPI + convexHull, guide purpose,
@@ -23,6 +25,7 @@ import numpy as np
 
 from assets import Asset
 
+from .names import file_stem, usd_prim_name
 from .preconditions import exportable_inertial
 
 __all__ = ["export_usd"]
@@ -82,10 +85,10 @@ def export_usd(asset: Asset, out_dir: Path) -> Path:
         ValueError: an unphysical inertia tensor, no collision parts, an empty joint
             range or unreadable mesh files. A base mesh is not written to USD.
     """
-    from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 
     out_dir = Path(out_dir)
-    path = out_dir / f"{asset.name}.usda"
+    path = out_dir / f"{file_stem(asset.name)}.usda"
 
     inertial = exportable_inertial(asset, path, "export_usd")
     I = inertial.inertia_matrix()
@@ -99,7 +102,7 @@ def export_usd(asset: Asset, out_dir: Path) -> Path:
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
 
-    root_path = Sdf.Path("/" + Tf.MakeValidIdentifier(asset.name))
+    root_path = Sdf.Path.absoluteRootPath.AppendChild(usd_prim_name(asset.name))
     body = UsdGeom.Xform.Define(stage, root_path)
     prim = body.GetPrim()
     stage.SetDefaultPrim(prim)
@@ -135,6 +138,9 @@ def export_usd(asset: Asset, out_dir: Path) -> Path:
     if (std := _std_or_none(theta.friction)) is not None:
         prim.CreateAttribute("twin:frictionStd", Sdf.ValueTypeNames.Double).Set(float(std))
     prim.SetCustomDataByKey("twin:kind", asset.kind)
+    # displayName is newer (USD 23.11) than many readers in use; doc and customData are known to all
+    prim.SetDocumentation(asset.name)
+    prim.SetCustomDataByKey("twin:name", asset.name)
 
     material = UsdShade.Material.Define(stage, root_path.AppendChild("PhysicsMaterial"))
     physics_material = UsdPhysics.MaterialAPI.Apply(material.GetPrim())
@@ -148,7 +154,7 @@ def export_usd(asset: Asset, out_dir: Path) -> Path:
 
     UsdGeom.Scope.Define(stage, root_path.AppendChild("collision"))
     for rel in asset.geometry.collision:
-        name = Tf.MakeValidIdentifier(PurePosixPath(rel).stem)
+        name = usd_prim_name(PurePosixPath(rel).stem)
         mesh = _define_mesh(stage, root_path.AppendChild("collision").AppendChild(name), out_dir / rel)
         mesh.CreatePurposeAttr(UsdGeom.Tokens.guide)
         collider = mesh.GetPrim()

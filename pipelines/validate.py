@@ -6,6 +6,8 @@ Newton; USD: usd-core's UsdPhysics and Newton). For every loader the mass
 frame, are compared with `asset.theta`; so are surface friction and the
 placement where the format and the loader carry them. Any disagreement above
 the tolerance, or any file a loader cannot read, raises `ValidationError`.
+Bodies, links, joints and prims are looked up by the names the writers gave
+them, derived from `asset.name` by `exporters.names`.
 
 Relative errors:
     mass       |m - m0| / m0
@@ -29,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from assets import Asset
+from exporters.names import joint_name, mjcf_name, urdf_name, usd_prim_name
 
 __all__ = ["DEFAULT_TOLERANCE", "LOADERS", "LoaderCheck", "ValidationError", "ValidationReport", "validate_exports"]
 
@@ -161,9 +164,10 @@ def _read_mujoco(asset: Asset, path: Path) -> _Reading:
     import mujoco
 
     model = mujoco.MjModel.from_xml_path(str(path))
-    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, asset.name)
+    name = mjcf_name(asset.name)
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
     if body < 0:
-        raise ValueError(f"no body named {asset.name!r}")
+        raise ValueError(f"no body named {name!r}")
     R = _rotation_from_wxyz(model.body_iquat[body])
     inertia = R @ np.diag(model.body_inertia[body]) @ R.T
     geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body]
@@ -261,9 +265,10 @@ def _read_yourdfpy(asset: Asset, path: Path) -> _Reading:
     )
     if not urdf.validate():
         raise ValueError("yourdfpy's validate() rejected the file")
-    link = urdf.link_map.get(asset.name)
+    name = urdf_name(asset.name)
+    link = urdf.link_map.get(name)
     if link is None or link.inertial is None:
-        raise ValueError(f"no link {asset.name!r} with <inertial>")
+        raise ValueError(f"no link {name!r} with <inertial>")
     # yourdfpy skips missing meshes silently, so count what it loaded.
     n_collision = len(urdf.collision_scene.geometry) if urdf.collision_scene is not None else 0
     if n_collision != len(asset.geometry.collision):
@@ -333,6 +338,8 @@ def _read_usd_physics(asset: Asset, path: Path) -> _Reading:
     prim = stage.GetDefaultPrim()
     if not prim or not prim.HasAPI(UsdPhysics.RigidBodyAPI) or not prim.HasAPI(UsdPhysics.MassAPI):
         raise ValueError("default prim is missing or lacks RigidBodyAPI/MassAPI")
+    if prim.GetName() != usd_prim_name(asset.name):
+        raise ValueError(f"default prim is {prim.GetName()!r}, expected {usd_prim_name(asset.name)!r}")
     mass_api = UsdPhysics.MassAPI(prim)
     mass = mass_api.GetMassAttr().Get()
     com = mass_api.GetCenterOfMassAttr().Get()
@@ -547,10 +554,11 @@ def _read_mujoco_jointed(asset: Asset, path: Path) -> dict:
     model = mujoco.MjModel.from_xml_path(str(path))
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, asset.name)
-    joint = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{asset.name}_joint")
+    name = mjcf_name(asset.name)
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+    joint = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint_name(name))
     if body < 0 or joint < 0:
-        raise ValueError(f"no body {asset.name!r} with joint {asset.name}_joint")
+        raise ValueError(f"no body {name!r} with joint {joint_name(name)!r}")
     R_iner = _rotation_from_wxyz(model.body_iquat[body])
     R_body = data.xmat[body].reshape(3, 3).copy()
     dof = model.jnt_dofadr[joint]
@@ -577,10 +585,12 @@ def _read_newton_jointed(asset: Asset, path: Path, fmt: str) -> dict:
     builder = newton.ModelBuilder()
     {"mjcf": builder.add_mjcf, "urdf": builder.add_urdf, "usd": builder.add_usd}[fmt](str(path))
     model = builder.finalize(device="cpu")
+    # labels are paths ("model/worldbody/body", "robot/link", "/prim"); the names cannot hold a "/"
     labels = [str(label).split("/")[-1] for label in builder.body_label]
-    if asset.name not in labels:
-        raise ValueError(f"no body {asset.name!r} among {labels}")
-    body = labels.index(asset.name)
+    name = {"mjcf": mjcf_name, "urdf": urdf_name, "usd": usd_prim_name}[fmt](asset.name)
+    if name not in labels:
+        raise ValueError(f"no body {name!r} among {labels}")
+    body = labels.index(name)
     joint = int(np.flatnonzero(model.joint_child.numpy() == body)[0])
     dof = int(model.joint_qd_start.numpy()[joint])
     X_p = model.joint_X_p.numpy()[joint].astype(float)
@@ -613,9 +623,10 @@ def _read_yourdfpy_jointed(asset: Asset, path: Path) -> dict:
                               force_collision_mesh=False)
     if not urdf.validate():
         raise ValueError("yourdfpy's validate() rejected the file")
-    link, joint = urdf.link_map.get(asset.name), urdf.joint_map.get(f"{asset.name}_joint")
+    name = urdf_name(asset.name)
+    link, joint = urdf.link_map.get(name), urdf.joint_map.get(joint_name(name))
     if link is None or link.inertial is None or joint is None:
-        raise ValueError(f"no link {asset.name!r} with <inertial> on joint {asset.name}_joint")
+        raise ValueError(f"no link {name!r} with <inertial> on joint {joint_name(name)!r}")
     origin = np.asarray(link.inertial.origin, dtype=float)
     T = np.asarray(joint.origin, dtype=float)
     return {
@@ -694,7 +705,7 @@ def replay_jointed_mujoco(mjcf_path: Path, asset: Asset, recording, joint_fit, c
     model = mujoco.MjModel.from_xml_path(str(mjcf_path))
     model.opt.timestep = w.dt_s
     data = mujoco.MjData(model)
-    joint = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{asset.name}_joint")
+    joint = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint_name(mjcf_name(asset.name)))
     qpos, dof = model.jnt_qposadr[joint], model.jnt_dofadr[joint]
     S, W = w.q.shape[0] - 1, w.q.shape[1]
     q = np.zeros((S, W))

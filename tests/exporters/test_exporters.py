@@ -249,15 +249,17 @@ def test_unphysical_tensor_is_refused(asset: Asset, tmp_path: Path):
 
 
 def test_sliding_kind_and_odd_names_still_load(tmp_path: Path):
-    """A 'sliding' asset named 'mug-1 (red)' exports to files MuJoCo, yourdfpy and usd-core open."""
+    """A 'sliding' asset named 'mug-1 (red)' exports to 'mug-1 (red).*' files whose body MuJoCo, yourdfpy and
+    usd-core find as 'mug_1_red' (tests/exporters/test_names.py has the rules)."""
     import mujoco
     import yourdfpy
     from pxr import Usd
 
     asset = replace(make_asset(tmp_path, name="mug-1 (red)"), kind="sliding")
     paths = export_all(asset, tmp_path)
+    assert paths.mjcf == tmp_path / "mug-1 (red).xml"
     model = mujoco.MjModel.from_xml_path(str(paths.mjcf))
-    assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "mug-1 (red)") == 1
-    assert "mug-1 (red)" in yourdfpy.URDF.load(str(paths.urdf)).link_map
+    assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "mug_1_red") == 1
+    assert "mug_1_red" in yourdfpy.URDF.load(str(paths.urdf)).link_map
     stage = Usd.Stage.Open(str(paths.usd))  # keep the stage alive while its prims are used
-    assert stage.GetDefaultPrim().GetName() == "mug_1__red_"
+    assert stage.GetDefaultPrim().GetName() == "mug_1_red"
