@@ -14,7 +14,7 @@ import numpy as np
 
 Kind = Literal["free", "sliding", "prismatic", "revolute"]
 KINDS: tuple[str, ...] = ("free", "sliding", "prismatic", "revolute")
-Source = Literal["measured", "prior"]
+Source = Literal["measured", "prior", "weighed"]
 
 
 def _vec(values, length: int, name: str) -> tuple[float, ...]:
@@ -123,7 +123,8 @@ class Estimate:
 
     value/std are a float, a 3-vector or a 3x3 matrix (as nested tuples).
     `source` is "measured" when the data determined it, "prior" when it was
-    taken from the prior because the data could not.
+    taken from the prior because the data could not, "weighed" when it is the
+    user's weighing (`--mass`) because the data could not determine it.
     """
 
     value: Any
@@ -189,6 +190,13 @@ class Material:
     density: float
     friction: float
     restitution: float = 0.0
+    text: str | None = None
+    """The user's words for it (`--material` or object.json's hint), as written."""
+    source: str = "library"
+    """How `name` was chosen: "named" (--material), "hint" (object.json matched), "unmatched" (a hint the
+    library does not know: the wide `unknown` prior), "vlm", or "library" (no words given)."""
+    match_score: float | None = None
+    """How sure the match of `text` to `name` is, 0..1 (1: exact or a listed synonym)."""
 
 
 @dataclass(frozen=True)
@@ -256,6 +264,9 @@ class Asset:
     effects: tuple[Effect, ...] = ()
     fit: Fit | None = None
     unexplained: tuple[dict, ...] = ()
+    flags: tuple[dict, ...] = ()
+    """Warnings a user must see beside the numbers: {"parameter", "problem", ...} (a value outside its
+    prior bounds, a parameter a mismatch may have corrupted)."""
     files: dict = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
 

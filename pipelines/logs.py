@@ -24,6 +24,13 @@ Times are header stamps in seconds (as recorded, e.g. UNIX time); a zero stamp
 falls back to the message's log time. Frame ids are compared without a leading
 "/" (as tf2 does). Undecodable topics (e.g. the `robot_comm/*` schemas of the
 MIT pushing bags) are skipped with a warning; a damaged file raises `LogError`.
+
+What a file holds is checked before anything downstream sees it: samples with
+non-finite values and stamps far outside the rest of their stream (one message
+stamped at 2^31 s among stamps near 0) are dropped with a warning naming the file
+and topic; a pose or wrench stream mostly non-finite, a force beyond 1e5 N, a
+torque beyond 1e4 N m, a position beyond 1000 km, and pose and wrench streams
+whose stamps do not overlap raise `LogError`.
 """
 
 from __future__ import annotations
@@ -75,6 +82,17 @@ _ROLE_TYPES = {
     "joint": (JOINT_TYPE,),
 }
 _QUAT_NORM_TOL = 1e-6
+_FAR_STAMP_SPREADS = 1000.0
+"""A stamp farther from its stream's median stamp than this many spreads (the stamps' median absolute
+deviation, at least the median gap) is a glitch, not a pause: one message stamped at 2^31 s among stamps
+near 0 would stretch the recording over 68 years, and a pose grid over it would need terabytes."""
+MAX_FORCE_N = 1e5
+MAX_TORQUE_NM = 1e4
+MAX_POSITION_M = 1e6
+"""Beyond these a value is no measurement of a robot pushing an object (a unit or encoding error): it
+would only surface later as a singular fit."""
+_MALFORMED = (TypeError, ValueError, OverflowError)
+"""What reading a decoded message's fields raises when a JSON message holds the wrong types."""
 
 
 class LogError(ValueError):
@@ -508,7 +526,10 @@ def _xyzw(q: Any) -> tuple[float, float, float, float]:
 
 
 def _stamp_s(stamp: Any, log_ns: int) -> float:
-    """Seconds from a Time {sec, nanosec|nsec}; the log time if the stamp is zero or absent."""
+    """Seconds from a Time {sec, nanosec|nsec}; the log time if the stamp is zero or absent.
+
+    Raises one of `_MALFORMED` for fields that are no integers (JSON messages).
+    """
     if stamp is None:
         return log_ns * 1e-9
     sec = int(_get(stamp, "sec", 0) or 0)
@@ -549,16 +570,49 @@ def _decode_all(path: Path, raw: _Raw, ros2_factory) -> _Decoded | None:
     return _Decoded(raw, items)
 
 
-def _clean(path: Path, topic: str, t: np.ndarray, arrays: list[np.ndarray], ok: np.ndarray | None = None):
-    """Drop non-finite / invalid rows, sort by stamp and keep the first of equal stamps."""
-    keep = np.isfinite(t)
+def _at(t: float) -> str:
+    """A stamp for a message: to the millisecond (UNIX stamps need all ten digits before the point)."""
+    return f"{t:.3f}" if abs(t) < 1e12 else f"{t:.3g}"
+
+
+def _samples_word(n: int) -> str:
+    return f"{n} sample" if n == 1 else f"{n} samples"
+
+
+def _far_stamps(t: np.ndarray) -> np.ndarray:
+    """Mask of the stamps of a sorted, repeat-free stream that lie far outside its bulk.
+
+    Far is more than `_FAR_STAMP_SPREADS` spreads from the median stamp, the spread being the stamps'
+    median absolute deviation or the median gap if larger (so that three samples, two close together,
+    do not make the third an outlier). The median sample is never far, so something always remains.
+    """
+    t = np.asarray(t, dtype=float)
+    if len(t) < 3:
+        return np.zeros(len(t), dtype=bool)
+    middle = np.median(t)
+    spread = max(float(np.median(np.abs(t - middle))), float(np.median(np.diff(t))))
+    return np.abs(t - middle) > _FAR_STAMP_SPREADS * spread
+
+
+def _clean(path: Path, topic: str, t: np.ndarray, arrays: list[np.ndarray], ok: np.ndarray | None = None,
+           required: bool = False):
+    """Drop non-finite / invalid rows and stamps far from the rest, sort by stamp, keep the first of equal stamps.
+
+    A few non-finite samples are glitches and go with a warning; a `required` stream (pose, wrench) mostly
+    non-finite is broken (LogError), and so is any stream with nothing left.
+    """
+    n = len(t)
+    finite = np.isfinite(t)
     for a in arrays:
-        keep &= np.all(np.isfinite(a.reshape(len(t), -1)), axis=1)
-    if ok is not None:
-        keep &= ok
+        finite &= np.all(np.isfinite(a.reshape(n, -1)), axis=1)
+    non_finite = int(np.sum(~finite))
+    if required and 2 * non_finite > n:
+        raise LogError(f"{path}: {topic}: {non_finite} of {n} samples hold non-finite stamps or values")
+    keep = finite if ok is None else finite & ok
     dropped = int(np.sum(~keep))
     if dropped:
-        warnings.warn(f"{path}: {topic}: dropped {dropped} samples with non-finite or invalid values", stacklevel=3)
+        warnings.warn(f"{path}: {topic}: dropped {_samples_word(dropped)} with non-finite or invalid values",
+                      stacklevel=3)
     t = t[keep]
     arrays = [a[keep] for a in arrays]
     order = np.argsort(t, kind="stable")
@@ -568,10 +622,61 @@ def _clean(path: Path, topic: str, t: np.ndarray, arrays: list[np.ndarray], ok: 
     first[1:] = np.diff(t) > 0
     dup = int(np.sum(~first))
     if dup:
-        warnings.warn(f"{path}: {topic}: dropped {dup} samples with repeated stamps", stacklevel=3)
+        warnings.warn(f"{path}: {topic}: dropped {_samples_word(dup)} with repeated stamps", stacklevel=3)
     if not np.any(first):
         raise LogError(f"{path}: topic {topic} has no usable samples")
-    return t[first], [a[first] for a in arrays]
+    return drop_far_stamps(path, topic, t[first], [a[first] for a in arrays])
+
+
+def drop_far_stamps(path: Path, topic: str, t: np.ndarray, arrays: list[np.ndarray]):
+    """The rows of a sorted, repeat-free stream less those stamped far outside the rest, with a warning."""
+    far = _far_stamps(t)
+    if not far.any():
+        return t, arrays
+    near = t[~far]
+    warnings.warn(
+        f"{path}: {topic}: dropped {_samples_word(int(far.sum()))} stamped far outside the rest "
+        f"({_at(near[0])}..{_at(near[-1])} s), e.g. at {_at(t[far][0])} s",
+        stacklevel=4,
+    )
+    return near, [a[~far] for a in arrays]
+
+
+def require_overlap(path: Path, first: str, t_first: np.ndarray, second: str, t_second: np.ndarray) -> None:
+    """LogError unless two streams share some time: on clocks that never meet, nothing can be paired."""
+    if t_first[-1] < t_second[0] or t_second[-1] < t_first[0]:
+        raise LogError(
+            f"{path}: {first} stamps {_at(t_first[0])}..{_at(t_first[-1])} s and {second} stamps "
+            f"{_at(t_second[0])}..{_at(t_second[-1])} s do not overlap"
+        )
+
+
+def bounded(path: Path, topic: str, what: str, t: np.ndarray, values: np.ndarray, limit: float, unit: str) -> None:
+    """LogError if a component of a row exceeds `limit` in magnitude (see `MAX_FORCE_N`)."""
+    size = np.max(np.abs(values), axis=1)
+    beyond = np.flatnonzero(size > limit)
+    if beyond.size:
+        i = int(beyond[0])
+        raise LogError(
+            f"{path}: {topic}: {what} of {size[i]:.3g} {unit} at {_at(t[i])} s is beyond {limit:g} {unit} "
+            f"({beyond.size} of {len(t)} samples)"
+        )
+
+
+def _fields(path: Path, d: _Decoded, extract: Callable[[int, Any], Any]) -> list:
+    """extract(log_ns, message) of each message, skipping (with a warning) those whose fields have wrong types.
+
+    Decoded ROS 2 messages always have the schema's types; JSON messages may hold anything.
+    """
+    rows, malformed = [], 0
+    for log_ns, m in d.items:
+        try:
+            rows.append(extract(log_ns, m))
+        except _MALFORMED:
+            malformed += 1
+    if malformed:
+        warnings.warn(f"{path}: {d.topic}: skipped {malformed} messages with fields of the wrong type", stacklevel=3)
+    return rows
 
 
 def _dominant(path: Path, topic: str, keys: list) -> tuple[Any, np.ndarray]:
@@ -588,85 +693,95 @@ def _dominant(path: Path, topic: str, keys: list) -> tuple[Any, np.ndarray]:
     return key, mask
 
 
-def _pose_track(path: Path, d: _Decoded) -> tuple[PoseTrack, str]:
-    """The topic's poses, and its parent frame as recorded ("" if none; the track says "world")."""
-    t, pos, quat, keys = [], [], [], []
-    default_child = d.topic.lstrip("/")
-    for log_ns, m in d.items:
-        if d.type.endswith("TransformStamped"):
-            header = _get(m, "header")
-            tr = _get(m, "transform")
-            t.append(_stamp_s(_get(header, "stamp"), log_ns))
-            pos.append(_xyz(_get(tr, "translation")))
-            quat.append(_xyzw(_get(tr, "rotation")))
-            keys.append((_frame(_get(header, "frame_id")), _frame(_get(m, "child_frame_id"))))
-        elif d.type.endswith("PoseStamped"):
-            header = _get(m, "header")
-            p = _get(m, "pose")
-            t.append(_stamp_s(_get(header, "stamp"), log_ns))
-            pos.append(_xyz(_get(p, "position")))
-            quat.append(_xyzw(_get(p, "orientation")))
-            keys.append((_frame(_get(header, "frame_id")), ""))
-        else:  # foxglove PoseInFrame: timestamp, frame_id, pose
-            p = _get(m, "pose")
-            t.append(_stamp_s(_get(m, "timestamp"), log_ns))
-            pos.append(_xyz(_get(p, "position")))
-            quat.append(_xyzw(_get(p, "orientation")))
-            keys.append((_frame(_get(m, "frame_id")), ""))
-    if not t:
-        raise LogError(f"{path}: pose topic {d.topic} has no messages")
-    (frame_id, child), mask = _dominant(path, d.topic, keys)
-    t = np.asarray(t, dtype=float)[mask]
-    pos = np.asarray(pos, dtype=float)[mask]
-    quat = np.asarray(quat, dtype=float)[mask]
-    norm = np.linalg.norm(quat, axis=1)
+def _pose_row(type_: str) -> Callable[[int, Any], tuple]:
+    """(stamp, position, quaternion, (frame, child)) of one message of a pose type."""
+    def transform(log_ns, m):
+        header, tr = _get(m, "header"), _get(m, "transform")
+        return (_stamp_s(_get(header, "stamp"), log_ns), _xyz(_get(tr, "translation")),
+                _xyzw(_get(tr, "rotation")), (_frame(_get(header, "frame_id")), _frame(_get(m, "child_frame_id"))))
+
+    def pose(log_ns, m):
+        header, p = _get(m, "header"), _get(m, "pose")
+        return (_stamp_s(_get(header, "stamp"), log_ns), _xyz(_get(p, "position")), _xyzw(_get(p, "orientation")),
+                (_frame(_get(header, "frame_id")), ""))
+
+    def in_frame(log_ns, m):  # foxglove PoseInFrame: timestamp, frame_id, pose
+        p = _get(m, "pose")
+        return (_stamp_s(_get(m, "timestamp"), log_ns), _xyz(_get(p, "position")), _xyzw(_get(p, "orientation")),
+                (_frame(_get(m, "frame_id")), ""))
+
+    if type_.endswith("TransformStamped"):
+        return transform
+    return pose if type_.endswith("PoseStamped") else in_frame
+
+
+def _pose_track(path: Path, d: _Decoded, required: bool = True) -> tuple[PoseTrack, str]:
+    """The topic's poses, and its parent frame as recorded ("" if none; the track says "world").
+
+    `required`: read as the tracked pose, not a contact point (see `_clean`).
+    """
+    rows = _fields(path, d, _pose_row(d.type))
+    if not rows:
+        raise LogError(f"{path}: pose topic {d.topic} has no readable messages")
+    (frame_id, child), mask = _dominant(path, d.topic, [r[3] for r in rows])
+    rows = [r for r, keep in zip(rows, mask) if keep]
+    t = np.array([r[0] for r in rows], dtype=float)
+    pos = np.array([r[1] for r in rows], dtype=float)
+    quat = np.array([r[2] for r in rows], dtype=float)
+    with np.errstate(over="ignore", invalid="ignore"):  # huge components give an infinite norm, refused below
+        norm = np.linalg.norm(quat, axis=1)
     ok = np.isfinite(norm) & (np.abs(norm - 1.0) < 0.1)  # zero quaternions: occluded markers
-    t, (pos, quat) = _clean(path, d.topic, t, [pos, quat], ok)
+    t, (pos, quat) = _clean(path, d.topic, t, [pos, quat], ok, required)
+    bounded(path, d.topic, "position", t, pos, MAX_POSITION_M, "m")
     quat = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+    default_child = d.topic.lstrip("/")
     return PoseTrack(t, pos, quat, frame_id or "world", child or default_child, d.topic), frame_id
 
 
 def _wrench_samples(path: Path, d: _Decoded) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
-    t, f, tau, frames = [], [], [], []
-    for log_ns, m in d.items:
-        header = _get(m, "header")
-        w = _get(m, "wrench")
-        t.append(_stamp_s(_get(header, "stamp"), log_ns))
-        f.append(_xyz(_get(w, "force")))
-        tau.append(_xyz(_get(w, "torque")))
-        frames.append(_frame(_get(header, "frame_id")))
-    if not t:
-        raise LogError(f"{path}: wrench topic {d.topic} has no messages")
-    return np.asarray(t, dtype=float), np.asarray(f, dtype=float), np.asarray(tau, dtype=float), frames
+    def row(log_ns, m):
+        header, w = _get(m, "header"), _get(m, "wrench")
+        return (_stamp_s(_get(header, "stamp"), log_ns), _xyz(_get(w, "force")), _xyz(_get(w, "torque")),
+                _frame(_get(header, "frame_id")))
+
+    rows = _fields(path, d, row)
+    if not rows:
+        raise LogError(f"{path}: wrench topic {d.topic} has no readable messages")
+    t, f, tau, frames = zip(*rows)
+    return np.array(t, dtype=float), np.array(f, dtype=float), np.array(tau, dtype=float), list(frames)
 
 
 def _point_track(path: Path, d: _Decoded, frame_if_empty: str = "") -> PointTrack | None:
     """Points of a PointStamped topic, or the origins of a pose topic's poses."""
     if d.type != POINT_TYPE:
-        track, recorded = _pose_track(path, d)
+        track, recorded = _pose_track(path, d, required=False)
         return PointTrack(track.t_s, track.position, recorded or frame_if_empty, d.topic)
-    t, p, frames = [], [], []
-    for log_ns, m in d.items:
+
+    def row(log_ns, m):
         header = _get(m, "header")
-        t.append(_stamp_s(_get(header, "stamp"), log_ns))
-        p.append(_xyz(_get(m, "point")))
-        frames.append(_frame(_get(header, "frame_id")) or frame_if_empty)
-    if not t:
+        return (_stamp_s(_get(header, "stamp"), log_ns), _xyz(_get(m, "point")),
+                _frame(_get(header, "frame_id")) or frame_if_empty)
+
+    rows = _fields(path, d, row)
+    if not rows:
         return None
-    frame, mask = _dominant(path, d.topic, frames)
-    t, (p,) = _clean(path, d.topic, np.asarray(t, dtype=float)[mask], [np.asarray(p, dtype=float)[mask]])
+    t, p, frames = zip(*rows)
+    frame, mask = _dominant(path, d.topic, list(frames))
+    t, (p,) = _clean(path, d.topic, np.array(t, dtype=float)[mask], [np.array(p, dtype=float)[mask]])
+    bounded(path, d.topic, "contact point", t, p, MAX_POSITION_M, "m")
     return PointTrack(t, p, frame, d.topic)
 
 
 def _joint_track(path: Path, d: _Decoded) -> JointTrack | None:
+    def row(log_ns, m):
+        return (_stamp_s(_get(_get(m, "header"), "stamp"), log_ns), tuple(str(x) for x in (_get(m, "name") or ())),
+                [float(x) for x in (_get(m, "position") or ())], [float(x) for x in (_get(m, "velocity") or ())])
+
     names: tuple[str, ...] | None = None
     t, q, v, skipped = [], [], [], 0
-    for log_ns, m in d.items:
-        n = tuple(str(x) for x in (_get(m, "name") or ()))
-        pos = list(_get(m, "position") or ())
-        vel = list(_get(m, "velocity") or ())
+    for stamp, n, pos, vel in _fields(path, d, row):
         if names is None:
-            if not n or len(pos) != len(n):
+            if not n or len(set(n)) != len(n) or len(pos) != len(n):
                 skipped += 1
                 continue
             names = n
@@ -674,9 +789,9 @@ def _joint_track(path: Path, d: _Decoded) -> JointTrack | None:
             skipped += 1
             continue
         order = [n.index(name) for name in names]
-        t.append(_stamp_s(_get(_get(m, "header"), "stamp"), log_ns))
-        q.append([float(pos[i]) for i in order])
-        v.append([float(vel[i]) for i in order] if len(vel) == len(n) else None)
+        t.append(stamp)
+        q.append([pos[i] for i in order])
+        v.append([vel[i] for i in order] if len(vel) == len(n) else None)
     if skipped:
         warnings.warn(f"{path}: {d.topic}: skipped {skipped} messages with other or missing joints", stacklevel=3)
     if names is None or not t:
@@ -711,16 +826,21 @@ class _Edge:
 
 def _tf_edges(path: Path, decoded: list[_Decoded]) -> list[_Edge]:
     """Edges from TFMessage topics; /tf_static ones are static (last value wins)."""
+    def rows(log_ns, m):
+        out = []
+        for tr in _get(m, "transforms") or ():
+            header, x = _get(tr, "header"), _get(tr, "transform")
+            out.append(((_frame(_get(header, "frame_id")), _frame(_get(tr, "child_frame_id"))),
+                        (_stamp_s(_get(header, "stamp"), log_ns), *_xyz(_get(x, "translation")),
+                         *_xyzw(_get(x, "rotation")))))
+        return out
+
     samples: dict[tuple[str, str], list] = {}
     static: set[tuple[str, str]] = set()
     for d in decoded:
         is_static = d.topic.rstrip("/").endswith("tf_static")
-        for log_ns, m in d.items:
-            for tr in _get(m, "transforms") or ():
-                header = _get(tr, "header")
-                key = (_frame(_get(header, "frame_id")), _frame(_get(tr, "child_frame_id")))
-                x = _get(tr, "transform")
-                row = (_stamp_s(_get(header, "stamp"), log_ns), *_xyz(_get(x, "translation")), *_xyzw(_get(x, "rotation")))
+        for message in _fields(path, d, rows):
+            for key, row in message:
                 samples.setdefault(key, []).append(row)
                 if is_static:
                     static.add(key)
@@ -730,8 +850,9 @@ def _tf_edges(path: Path, decoded: list[_Decoded]) -> list[_Edge]:
         key_static = (parent, child) in static
         if key_static:
             a = a[-1:]
-        norm = np.linalg.norm(a[:, 4:8], axis=1)
-        ok = np.abs(norm - 1.0) < 0.1
+        with np.errstate(over="ignore", invalid="ignore"):
+            norm = np.linalg.norm(a[:, 4:8], axis=1)
+            ok = (np.abs(norm - 1.0) < 0.1) & (np.linalg.norm(a[:, 1:4], axis=1) <= MAX_POSITION_M)
         try:
             t, (p, q) = _clean(path, f"/tf {parent}->{child}", a[:, 0], [a[:, 1:4], a[:, 4:8]], ok)
         except LogError:
@@ -829,7 +950,8 @@ def read_recording(
     Raises:
         LogError: file missing, not MCAP, truncated or corrupt; no pose or wrench
             topic; an override naming an absent topic or a wrong type; a wrench
-            frame that cannot be resolved to world.
+            frame that cannot be resolved to world; values out of reason or pose
+            and wrench stamps that do not overlap (module docstring).
         ValueError: an unknown role in `topics` or `frames`, or a rotation that
             is not a unit quaternion.
     """
@@ -890,7 +1012,9 @@ def read_recording(
     t_w, f_w, tau_w, frames_w = _wrench_samples(path, wrench_d)
     frames_w = [f or frames.get("wrench", "") for f in frames_w]
     wrench_frame, mask = _dominant(path, wrench_d.topic, frames_w)
-    t_w, (f_w, tau_w) = _clean(path, wrench_d.topic, t_w[mask], [f_w[mask], tau_w[mask]])
+    t_w, (f_w, tau_w) = _clean(path, wrench_d.topic, t_w[mask], [f_w[mask], tau_w[mask]], required=True)
+    bounded(path, wrench_d.topic, "force", t_w, f_w, MAX_FORCE_N, "N")
+    bounded(path, wrench_d.topic, "torque", t_w, tau_w, MAX_TORQUE_NM, "N m")
     wrench_raw = WrenchTrack(t_w, f_w, tau_w, wrench_d.topic, wrench_frame)
 
     # pose
@@ -900,7 +1024,17 @@ def read_recording(
         cands = of_type(POSE_TYPES, exclude=(*_TF_TOPICS, topics.get("contact")))
         if not cands:
             raise LogError(f"{path}: no pose topic ({', '.join(POSE_TYPES)})")
-        tracks = {d.topic: _pose_track(path, d) for d in cands}
+        tracks, broken = {}, []
+        for d in cands:
+            try:
+                tracks[d.topic] = _pose_track(path, d)
+            except LogError as exc:  # a broken topic beside a good one is not the tracked pose
+                broken.append(exc)
+        if not tracks:
+            raise broken[0]
+        for exc in broken:
+            warnings.warn(f"{exc}; not taken as the pose", stacklevel=2)
+        cands = [d for d in cands if d.topic in tracks]
 
         def pose_rank(d: _Decoded) -> tuple:
             track, recorded_frame = tracks[d.topic]
@@ -912,6 +1046,7 @@ def read_recording(
             )
 
         pose = tracks[_choose(path, "pose", cands, pose_rank).topic][0]
+    require_overlap(path, f"pose topic {pose.topic}", pose.t_s, f"wrench topic {wrench_d.topic}", t_w)
 
     # contact and joints (optional)
     contact = None

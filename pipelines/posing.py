@@ -354,14 +354,15 @@ def _read_color(path, intr):
     """Colour as an Open3D float image in [0, 1], or None when it cannot be read or differs in size."""
     import open3d as o3d
     import open3d.core as o3c
-    from PIL import Image
+
+    from .scan import ScanError, _open_image, _pixels
 
     try:
-        with Image.open(path) as im:
-            rgb = np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0
-    except (OSError, ValueError):
-        return None
-    if rgb.shape[:2] != (intr.height, intr.width):
+        with _open_image(path) as im:
+            if im.size != (intr.width, intr.height):  # checked before decoding: the header may claim any size
+                return None
+            rgb = _pixels(im, path, "RGB").astype(np.float32) / 255.0
+    except ScanError:
         return None
     return o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(rgb)))
 

@@ -37,7 +37,10 @@ Conventions this reader settles for everything downstream:
   its ray in the camera is ((u + 0.5 - cx) / fx, (v + 0.5 - cy) / fy, 1).
 
 Everything is checked on reading; anything malformed raises `ScanError`, whose
-message starts with the path of the offending file.
+message starts with the path of the offending file. Image headers are checked
+against the camera's size before any pixel is decoded, so a file whose header
+claims a huge image allocates nothing. A scan whose views leave a side of the
+object unseen reads with a warning (see `read_scan`).
 """
 
 from __future__ import annotations
@@ -46,6 +49,10 @@ import dataclasses
 import json
 import math
 import re
+import struct
+import tokenize
+import warnings
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -74,6 +81,11 @@ _SEVEN_SCENES_INTRINSICS = "camera-intrinsics.txt"
 _SEVEN_SCENES_DEPTH = re.compile(r"^frame-(\d+)\.depth\.png$")
 _SEVEN_SCENES_COLOR_SUFFIXES = (".color.jpg", ".color.png")
 _SEVEN_SCENES_INVALID_DEPTH = 65535  # Kinect's "no reading" besides 0
+_MAX_PIXELS = 50_000_000  # above any RGB-D camera (8K colour is 33 MP); bounds what one frame allocates
+_MAX_CAMERA_DISTANCE_M = 1000.0  # from the world origin; further is not metres (and overflows the maths)
+_MAX_FIELD_OF_VIEW_DEG = 170.0  # wider is a fisheye lens, or a focal length in the wrong unit
+_MAX_AZIMUTH_GAP_DEG = 120.0  # see _warn_if_uncovered
+_OVERHEAD_ELEVATION_DEG = 75.0
 
 
 class ScanError(ValueError):
@@ -180,11 +192,18 @@ def read_scan(
     Returns:
         The scan, depth in metres, poses in OpenCV axes.
 
+    Warns:
+        UserWarning: naming the scan directory when its views cannot close the object: a single
+            view, or views that leave an azimuth gap over 120 deg around it (criterion in
+            `_warn_if_uncovered`). The scan still reads; the fused mesh is then closed by guesswork
+            on the unseen side.
+
     Raises:
         ScanError: naming the offending file for a directory of neither layout, bad
             intrinsics, no frames, a frame without depth, missing or unreadable files, depth
-            that is not 16-bit, image sizes that differ from the camera's, non-finite or
-            non-rigid poses, poses given for some frames only, missing poses with
+            that is not 16-bit, image sizes that differ from the camera's, images over 50
+            megapixels, non-finite or non-rigid poses, cameras over 1 km from the world origin,
+            poses given for some frames only, missing poses with
             poses="given", an implausible depth scale, or frames the estimator cannot pose.
     """
     path = Path(path)
@@ -239,6 +258,7 @@ def read_scan(
         layout=layout,
     )
     if given is not None and poses != "estimate":
+        _warn_if_uncovered(scan)
         return scan
     from .posing import PosingConfig, PosingError, estimate_poses
 
@@ -251,9 +271,11 @@ def read_scan(
         T = np.array(T, dtype=float)
         T.setflags(write=False)
         posed_frames.append(dataclasses.replace(f, T_world_camera=T))
-    return dataclasses.replace(
+    scan = dataclasses.replace(
         scan, frames=tuple(posed_frames), pose_source="estimated", given_T_world_camera=given, pose_stats=estimate.stats
     )
+    _warn_if_uncovered(scan)
+    return scan
 
 
 def _read_nerfstudio(root: Path) -> tuple[Intrinsics, list, float, Path]:
@@ -266,7 +288,8 @@ def _read_nerfstudio(root: Path) -> tuple[Intrinsics, list, float, Path]:
     model = meta.get("camera_model", "OPENCV")
     if model not in _SUPPORTED_CAMERA_MODELS:
         raise ScanError(
-            f"{transforms_path}: camera_model {model!r} is not supported (expected one of {_SUPPORTED_CAMERA_MODELS})"
+            f"{transforms_path}: camera_model {_short(model)} is not supported "
+            f"(expected one of {_SUPPORTED_CAMERA_MODELS})"
         )
     depth_scale = _depth_scale(meta, transforms_path)
 
@@ -280,7 +303,7 @@ def _read_nerfstudio(root: Path) -> tuple[Intrinsics, list, float, Path]:
     else:  # per-frame intrinsics only (as Polycam exports write them): the first frame's stands for the scan
         intrinsics = _intrinsics(frames_meta[0], transforms_path, "frame 0")
     # a scan either poses every frame or none (then the poses are estimated)
-    pose_free = all(isinstance(f, dict) and "transform_matrix" not in f for f in frames_meta)
+    pose_free = not any(isinstance(f, dict) and "transform_matrix" in f for f in frames_meta)
     frames = [
         _read_frame(i, f, meta, intrinsics, root, transforms_path, depth_scale, pose_free)
         for i, f in enumerate(frames_meta)
@@ -292,30 +315,64 @@ def _read_json(path: Path):
     try:
         return json.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as e:
-        raise ScanError(f"{path}: cannot read ({e})") from e
+        raise ScanError(f"{path}: cannot read ({_detail(e)})") from e
     except json.JSONDecodeError as e:
-        raise ScanError(f"{path}: not valid JSON ({e})") from e
+        raise ScanError(f"{path}: not valid JSON ({_detail(e)})") from e
+    except ValueError as e:  # an integer of more digits than Python converts
+        raise ScanError(f"{path}: not readable JSON ({_detail(e)})") from e
+    except RecursionError as e:
+        raise ScanError(f"{path}: not readable JSON (nested too deeply)") from e
+
+
+def _finite(value) -> float | None:
+    """value as a float when it is a finite JSON number, else None (a 400-digit integer overflows a float)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        value = float(value)
+    except OverflowError:
+        return None
+    return value if math.isfinite(value) else None
 
 
 def _depth_scale(meta: dict, transforms_path: Path) -> float:
-    value = meta.get("depth_unit_scale_factor", _DEFAULT_DEPTH_SCALE_M)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ScanError(f"{transforms_path}: depth_unit_scale_factor must be a finite number [m/unit], got {value!r}")
+    given = meta.get("depth_unit_scale_factor", _DEFAULT_DEPTH_SCALE_M)
+    value = _finite(given)
+    if value is None:
+        raise ScanError(
+            f"{transforms_path}: depth_unit_scale_factor must be a finite number [m/unit], got {_short(given)}"
+        )
     if not 0.0 < value <= _MAX_DEPTH_SCALE_M:
         raise ScanError(
             f"{transforms_path}: depth_unit_scale_factor {value!r} m/unit is out of range (0, {_MAX_DEPTH_SCALE_M}]; "
             "typical values are 0.001 (mm) and 0.0001"
         )
-    return float(value)
+    return value
 
 
 def _number(d: dict, key: str, where: str, transforms_path: Path) -> float:
     if key not in d:
         raise ScanError(f"{transforms_path}: {where}: intrinsic '{key}' is missing")
-    value = d[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ScanError(f"{transforms_path}: {where}: intrinsic '{key}' must be a finite number, got {value!r}")
-    return float(value)
+    value = _finite(d[key])
+    if value is None:
+        raise ScanError(f"{transforms_path}: {where}: intrinsic '{key}' must be a finite number, got {_short(d[key])}")
+    return value
+
+
+def _short(value) -> str:
+    """repr of a value from the user's file, cut to fit a one-line message."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 10**20:
+        return f"an integer of {len(str(abs(value)))} digits"  # JSON holds none beyond Python's printing limit
+    return _cut(repr(value), 80)
+
+
+def _detail(e: BaseException) -> str:
+    """An exception's message on one line, cut to fit in ours (a parser may quote a whole damaged header)."""
+    return _cut(" ".join(str(e).split()) or type(e).__name__, 200)
+
+
+def _cut(text: str, limit: int) -> str:
+    return text if len(text) <= limit else f"{text[:limit - 3]}..."
 
 
 def _intrinsics(d: dict, transforms_path: Path, where: str) -> Intrinsics:
@@ -326,6 +383,8 @@ def _intrinsics(d: dict, transforms_path: Path, where: str) -> Intrinsics:
         )
     if w != int(w) or h != int(h) or w < 1 or h < 1:
         raise ScanError(f"{transforms_path}: {where}: w and h must be positive integers [pixels], got w={w}, h={h}")
+    _check_pixel_count(transforms_path, w, h, f"{where}: w x h")
+    _check_field_of_view(f"{transforms_path}: {where}", fx, fy, int(w), int(h))
     if not (0 < cx < w and 0 < cy < h):
         raise ScanError(
             f"{transforms_path}: {where}: principal point ({cx}, {cy}) lies outside the {int(w)}x{int(h)} image"
@@ -337,6 +396,23 @@ def _intrinsics(d: dict, transforms_path: Path, where: str) -> Intrinsics:
     return Intrinsics(fx=fx, fy=fy, cx=cx, cy=cy, width=int(w), height=int(h), **dist)
 
 
+def _check_pixel_count(path: Path, width: float, height: float, what: str) -> None:
+    if width * height > _MAX_PIXELS:
+        raise ScanError(
+            f"{path}: {what} = {width:g}x{height:g} is over {_MAX_PIXELS / 1e6:g} megapixels, more than any RGB-D "
+            "camera's"
+        )
+
+
+def _check_field_of_view(where: str, fx: float, fy: float, width: int, height: int) -> None:
+    fov = np.degrees(2.0 * np.arctan2([0.5 * width, 0.5 * height], [fx, fy]))
+    if fov.max() > _MAX_FIELD_OF_VIEW_DEG:
+        raise ScanError(
+            f"{where}: focal lengths fx={fx:g}, fy={fy:g} give a {fov[0]:.0f} x {fov[1]:.0f} deg field of view on "
+            f"{width}x{height} pixels, over {_MAX_FIELD_OF_VIEW_DEG:g} deg; fisheye cameras are not supported"
+        )
+
+
 def _frame_intrinsics(i: int, f: dict, meta: dict, shared: Intrinsics, transforms_path: Path) -> Intrinsics:
     if not any(k in f for k in _INTRINSIC_KEYS + _DISTORTION_KEYS):
         return shared
@@ -346,18 +422,30 @@ def _frame_intrinsics(i: int, f: dict, meta: dict, shared: Intrinsics, transform
 
 
 def _pose_opencv(i: int, f: dict, transforms_path: Path) -> np.ndarray:
-    where = f"{transforms_path}: frame {i} ({f.get('file_path', '?')})"
+    where = f"{transforms_path}: frame {i} ({_short(f.get('file_path', '?'))})"
     if "transform_matrix" not in f:
         raise ScanError(f"{where}: transform_matrix is missing")
     try:
         T = np.array(f["transform_matrix"], dtype=float)
     except (TypeError, ValueError) as e:
-        raise ScanError(f"{where}: transform_matrix is not a numeric 4x4 matrix ({e})") from e
+        raise ScanError(f"{where}: transform_matrix is not a numeric 4x4 matrix ({_detail(e)})") from e
+    except OverflowError as e:
+        raise ScanError(f"{where}: transform_matrix has non-finite entries (an integer beyond a float's range)") from e
     if T.shape != (4, 4):
         raise ScanError(f"{where}: transform_matrix must be 4x4, got shape {T.shape}")
     if not np.all(np.isfinite(T)):
         raise ScanError(f"{where}: transform_matrix has non-finite entries")
+    _check_translation(T, f"{where}: transform_matrix")
     return _rigid(T, f"{where}: transform_matrix") @ OPENCV_FROM_OPENGL
+
+
+def _check_translation(T: np.ndarray, what: str) -> None:
+    distance = float(np.abs(T[:3, 3]).max())
+    if distance > _MAX_CAMERA_DISTANCE_M:
+        raise ScanError(
+            f"{what} puts the camera {distance:.3g} m from the world origin (over {_MAX_CAMERA_DISTANCE_M:g} m); "
+            "expected a translation in metres"
+        )
 
 
 def _rigid(T: np.ndarray, what: str) -> np.ndarray:
@@ -369,10 +457,12 @@ def _rigid(T: np.ndarray, what: str) -> np.ndarray:
     if np.abs(T[3] - [0.0, 0.0, 0.0, 1.0]).max() > 1e-6:
         raise ScanError(f"{what}: the last row must be [0, 0, 0, 1], got {T[3].tolist()}")
     R = T[:3, :3]
-    err = np.abs(R.T @ R - np.eye(3)).max()
-    if err > _ROTATION_TOLERANCE or np.linalg.det(R) <= 0:
+    with np.errstate(over="ignore", invalid="ignore"):  # entries near 1e308 overflow: not rigid either way
+        err = np.abs(R.T @ R - np.eye(3)).max()
+        det = np.linalg.det(R)
+    if not err <= _ROTATION_TOLERANCE or not det > 0:
         raise ScanError(
-            f"{what} is not rigid (|R^T R - I| = {err:.3g}, det R = {np.linalg.det(R):.4g}); "
+            f"{what} is not rigid (|R^T R - I| = {err:.3g}, det R = {det:.4g}); "
             "expected a rotation and a translation in metres"
         )
     U, _, Vt = np.linalg.svd(R)
@@ -383,32 +473,50 @@ def _rigid(T: np.ndarray, what: str) -> np.ndarray:
 
 def _file(root: Path, rel, transforms_path: Path, what: str, i: int) -> Path:
     if not isinstance(rel, str) or not rel:
-        raise ScanError(f"{transforms_path}: frame {i}: {what} must be a non-empty path string, got {rel!r}")
-    p = (root / rel).resolve()
-    if not p.is_file():
+        raise ScanError(f"{transforms_path}: frame {i}: {what} must be a non-empty path string, got {_short(rel)}")
+    try:
+        p = (root / rel).resolve()
+        found = p.is_file()
+    except (OSError, ValueError) as e:  # a NUL byte, a name too long for the file system
+        raise ScanError(
+            f"{transforms_path}: frame {i}: {what} {_short(rel)} is not a usable path ({_detail(e)})"
+        ) from e
+    if not found:
         raise ScanError(f"{p}: {what} of frame {i} not found (listed in {transforms_path})")
     return p
 
 
-def _open_image(path: Path):
+def _pillow_errors() -> tuple[type[BaseException], ...]:
+    """What Pillow raises for a damaged or oversized image file (UnidentifiedImageError is an OSError)."""
     from PIL import Image
 
+    return (Image.DecompressionBombError, OSError, ValueError, SyntaxError, EOFError, struct.error, zlib.error)
+
+
+def _open_image(path: Path):
+    """The image with its header read and its pixels not yet decoded (a context manager)."""
+    from PIL import Image
+
+    with warnings.catch_warnings():
+        # sizes are checked against the camera's before decoding, a far tighter bound than Pillow's
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        try:
+            return Image.open(path)
+        except _pillow_errors() as e:
+            raise ScanError(f"{path}: cannot read image ({_detail(e)})") from e
+
+
+def _pixels(im, path: Path, mode: str | None = None) -> np.ndarray:
+    """The pixels of an opened image, decoded now (and converted to `mode` if given)."""
     try:
-        im = Image.open(path)
-        im.load()
-        return im
-    except (OSError, ValueError) as e:
-        raise ScanError(f"{path}: cannot read image ({e})") from e
+        return np.array(im.convert(mode) if mode else im)
+    except _pillow_errors() as e:
+        raise ScanError(f"{path}: cannot read image ({_detail(e)})") from e
 
 
 def _image_size(path: Path) -> tuple[int, int]:
-    from PIL import Image
-
-    try:
-        with Image.open(path) as im:  # reads the header only
-            return im.size
-    except (OSError, ValueError) as e:
-        raise ScanError(f"{path}: cannot read image ({e})") from e
+    with _open_image(path) as im:
+        return im.size
 
 
 def _check_size(path: Path, size: tuple[int, int], intr: Intrinsics, what: str, source: str = "transforms.json") -> None:
@@ -422,18 +530,13 @@ def _read_depth(
     path: Path, intr: Intrinsics, scale_m: float, source: str = "transforms.json", invalid: int | None = None
 ) -> np.ndarray:
     if path.suffix.lower() == ".npy":
-        try:
-            raw = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as e:
-            raise ScanError(f"{path}: cannot read depth array ({e})") from e
-        if raw.dtype != np.uint16 or raw.ndim != 2:
-            raise ScanError(f"{path}: depth must be 16-bit (uint16, 2-D), got {raw.dtype} with shape {raw.shape}")
+        raw = _read_depth_array(path, intr, source)
     else:
-        im = _open_image(path)
-        if not im.mode.startswith("I;16"):
-            raise ScanError(f"{path}: depth must be a 16-bit single-channel image, got PIL mode {im.mode!r}")
-        raw = np.array(im).astype(np.uint16, copy=False)
-    _check_size(path, (raw.shape[1], raw.shape[0]), intr, "depth image", source)
+        with _open_image(path) as im:
+            _check_size(path, im.size, intr, "depth image", source)
+            if not im.mode.startswith("I;16"):
+                raise ScanError(f"{path}: depth must be a 16-bit single-channel image, got PIL mode {im.mode!r}")
+            raw = _pixels(im, path).astype(np.uint16, copy=False)
     depth = raw.astype(np.float32) * np.float32(scale_m)
     if invalid is not None:
         depth[raw == invalid] = 0.0
@@ -443,14 +546,28 @@ def _read_depth(
     return depth
 
 
+def _read_depth_array(path: Path, intr: Intrinsics, source: str) -> np.ndarray:
+    # memory-mapped, so that a header claiming a huge shape costs nothing before the size check
+    try:
+        raw = np.load(path, mmap_mode="r", allow_pickle=False)
+    # numpy parses the header as a Python literal (TypeError for an unhashable key, OverflowError for a
+    # dimension beyond C's long) and tokenizes version-1 headers
+    except (OSError, ValueError, EOFError, TypeError, OverflowError, tokenize.TokenError) as e:
+        raise ScanError(f"{path}: cannot read depth array ({_detail(e)})") from e
+    if not isinstance(raw, np.ndarray):
+        raise ScanError(f"{path}: expected one .npy array, got a .npz archive")
+    if raw.dtype != np.uint16 or raw.ndim != 2:
+        raise ScanError(f"{path}: depth must be 16-bit (uint16, 2-D), got {raw.dtype} with shape {raw.shape}")
+    _check_size(path, (raw.shape[1], raw.shape[0]), intr, "depth array", source)
+    return np.array(raw)
+
+
 def _read_mask(path: Path, intr: Intrinsics, source: str = "transforms.json") -> np.ndarray:
-    im = _open_image(path)
-    if im.mode not in ("1", "L", "P", "LA", "RGB", "RGBA"):
-        raise ScanError(f"{path}: mask must be an 8-bit image (object > 0), got PIL mode {im.mode!r}")
-    _check_size(path, im.size, intr, "mask", source)
-    if im.mode == "P":
-        im = im.convert("L")
-    arr = np.array(im)
+    with _open_image(path) as im:
+        if im.mode not in ("1", "L", "P", "LA", "RGB", "RGBA"):
+            raise ScanError(f"{path}: mask must be an 8-bit image (object > 0), got PIL mode {im.mode!r}")
+        _check_size(path, im.size, intr, "mask", source)
+        arr = _pixels(im, path, "L" if im.mode == "P" else None)
     mask = (arr[..., 0] if arr.ndim == 3 else arr) > 0
     mask.setflags(write=False)
     return mask
@@ -465,7 +582,7 @@ def _read_frame(
     color_path = _file(root, f.get("file_path"), transforms_path, "colour image (file_path)", i)
     if not f.get("depth_file_path"):
         raise ScanError(
-            f"{transforms_path}: frame {i} ({f.get('file_path')}): depth is missing (no depth_file_path); "
+            f"{transforms_path}: frame {i} ({_short(f.get('file_path'))}): depth is missing (no depth_file_path); "
             "twin needs an RGB-D scan"
         )
     depth_path = _file(root, f["depth_file_path"], transforms_path, "depth image (depth_file_path)", i)
@@ -521,15 +638,15 @@ def _read_matrix(path: Path, shape: tuple[int, int], what: str) -> np.ndarray:
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as e:
-        raise ScanError(f"{path}: cannot read ({e})") from e
+        raise ScanError(f"{path}: cannot read ({_detail(e)})") from e
     try:
         rows = [[float(x) for x in line.split()] for line in text.splitlines() if line.strip()]
-        M = np.array(rows, dtype=float)
     except ValueError as e:
-        raise ScanError(f"{path}: {what} is not a whitespace-separated numeric matrix ({e})") from e
-    if M.shape != shape:
+        raise ScanError(f"{path}: {what} is not a whitespace-separated numeric matrix ({_detail(e)})") from e
+    if len(rows) != shape[0] or any(len(r) != shape[1] for r in rows):
         raise ScanError(f"{path}: {what} must be {shape[0]}x{shape[1]}, got {len(rows)} rows of "
                         f"{sorted({len(r) for r in rows})} numbers")
+    M = np.array(rows, dtype=float)
     if not np.all(np.isfinite(M)):
         raise ScanError(f"{path}: {what} has non-finite entries")
     return M
@@ -551,11 +668,14 @@ def _seven_scenes_intrinsics(path: Path, width: int, height: int, size_from: Pat
         raise ScanError(
             f"{path}: principal point ({cx}, {cy}) lies outside the {width}x{height} image ({size_from.name})"
         )
+    _check_field_of_view(str(path), fx, fy, width, height)
     return Intrinsics(fx=float(fx), fy=float(fy), cx=float(cx), cy=float(cy), width=width, height=height)
 
 
 def _seven_scenes_pose(path: Path) -> np.ndarray:
-    T = _rigid(_read_matrix(path, (4, 4), "the camera-to-world pose"), f"{path}: the pose")
+    T = _read_matrix(path, (4, 4), "the camera-to-world pose")
+    _check_translation(T, f"{path}: the pose")
+    T = _rigid(T, f"{path}: the pose")
     T.setflags(write=False)
     return T
 
@@ -568,6 +688,7 @@ def _read_seven_scenes(root: Path, depth_scale: float) -> tuple[Intrinsics, list
         raise ScanError(f"{root}: no frames (expected frame-XXXXXX.depth.png files beside {intrinsics_path.name})")
     first = depths[0][1]
     width, height = _image_size(first)
+    _check_pixel_count(first, width, height, "the depth image's size")
     intrinsics = _seven_scenes_intrinsics(intrinsics_path, width, height, first)
     source = f"the first depth image ({first.name})"
     frames = []
@@ -596,6 +717,65 @@ def _read_seven_scenes(root: Path, depth_scale: float) -> tuple[Intrinsics, list
     return intrinsics, frames, intrinsics_path
 
 
+def _warn_if_uncovered(scan: Scan) -> None:
+    """Warn, naming the scan directory, when its views cannot see every side of the object.
+
+    Criterion: seen from above, the horizontal directions from the object's centre to the
+    cameras must leave no azimuth gap over 120 deg. A view sees the sides that face it within
+    about 60 deg (beyond, the depth grazes the surface and drops out), so consecutive views at
+    most 120 deg apart see every side; at least three views are needed. Cameras within 15 deg of
+    straight above (or below) the centre see the top only and count for no azimuth. "Above" is
+    world +z for the given poses of the nerfstudio layout; the 7-Scenes world and the estimated
+    one (the first camera's) have no known up, so there it is the first camera's up (-y: cameras
+    are held upright). The centre is the median over the views of the point each one sees at the
+    median pixel and median depth of its mask (of its valid depth without a mask).
+    """
+    n = len(scan.frames)
+    if n < 3:
+        views = "1 view" if n == 1 else f"{n} views"
+        warnings.warn(f"{scan.root}: {views}; at least 3 around the object are needed to close it", stacklevel=3)
+        return
+    poses = np.array([f.T_world_camera for f in scan.frames])
+    centre = np.median([_seen_point(f) for f in scan.frames], axis=0)
+    given_up = scan.layout == "nerfstudio" and scan.pose_source == "given"
+    up = np.array([0.0, 0.0, 1.0]) if given_up else -poses[0, :3, 1]
+    offsets = poses[:, :3, 3] - centre
+    heights = offsets @ up
+    horizontal = offsets - np.outer(heights, up)
+    side = np.linalg.norm(horizontal, axis=1) > np.tan(np.radians(90.0 - _OVERHEAD_ELEVATION_DEG)) * np.abs(heights)
+    if not side.any():
+        warnings.warn(
+            f"{scan.root}: all {n} views look at the object from above; views around it (no azimuth gap over "
+            f"{_MAX_AZIMUTH_GAP_DEG:g} deg) are needed to close it",
+            stacklevel=3,
+        )
+        return
+    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    azimuths = np.sort(np.degrees(np.arctan2(horizontal[side] @ e2, horizontal[side] @ e1)))
+    gap = float(np.max(np.diff(np.append(azimuths, azimuths[0] + 360.0))))
+    if gap > _MAX_AZIMUTH_GAP_DEG:
+        overhead = f", {n - int(side.sum())} of them from above" if not side.all() else ""
+        warnings.warn(
+            f"{scan.root}: the {n} views{overhead} leave a {gap:.0f} deg gap in azimuth around the object; "
+            f"views all around it (no gap over {_MAX_AZIMUTH_GAP_DEG:g} deg) are needed to close it",
+            stacklevel=3,
+        )
+
+
+def _seen_point(frame: Frame) -> np.ndarray:
+    """The world point a frame sees at the median pixel and median depth of its mask (or valid depth) [m]."""
+    valid = frame.depth_m > 0
+    if frame.mask is not None and (frame.mask & valid).any():
+        valid = frame.mask & valid
+    v, u = np.nonzero(valid)
+    z = float(np.median(frame.depth_m[valid]))
+    intr = frame.intrinsics
+    ray = np.array([(np.median(u) + 0.5 - intr.cx) / intr.fx, (np.median(v) + 0.5 - intr.cy) / intr.fy, 1.0])
+    return frame.T_world_camera[:3, :3] @ (z * ray) + frame.T_world_camera[:3, 3]
+
+
 def _object_info(path: Path, default_name: str) -> tuple[str, str | None, str | None]:
     if not path.exists():
         return default_name, None, None
@@ -606,7 +786,7 @@ def _object_info(path: Path, default_name: str) -> tuple[str, str | None, str | 
     for key in ("name", "material", "notes"):
         value = info.get(key)
         if value is not None and not isinstance(value, str):
-            raise ScanError(f"{path}: '{key}' must be a string, got {value!r}")
+            raise ScanError(f"{path}: '{key}' must be a string, got {_short(value)}")
         out.append(value.strip() if isinstance(value, str) and value.strip() else None)
     name, material, notes = out
     return name or default_name, material, notes

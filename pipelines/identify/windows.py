@@ -45,11 +45,23 @@ class ShootingWindows:
         return self.step_count * self.dt_s
 
 
+MAX_GRID_SAMPLES = 10**7
+"""More pose samples than a day at 100 Hz: the span holds a stray stamp, not a recording."""
+
+
 def uniform_pose_grid(t_s, position, quat_xyzw) -> tuple[np.ndarray, np.ndarray, Rotation]:
-    """Poses resampled onto a uniform grid at the median sampling period."""
+    """Poses resampled onto a uniform grid at the median sampling period.
+
+    Raises ValueError rather than allocate more than `MAX_GRID_SAMPLES` samples.
+    """
     t_s = np.asarray(t_s, dtype=float)
     period = float(np.median(np.diff(t_s)))
-    grid = t_s[0] + period * np.arange(int(np.floor((t_s[-1] - t_s[0]) / period + 1e-6)) + 1)
+    span = float(t_s[-1] - t_s[0])
+    count = span / period + 1 if period > 0 else np.inf
+    if not count <= MAX_GRID_SAMPLES:
+        raise ValueError(f"uniform_pose_grid: {t_s[0]:.3f}..{t_s[-1]:.3f} s ({span:.3g} s) at a {period:.3g} s "
+                         f"period would take {count:.3g} samples, more than {MAX_GRID_SAMPLES:g}")
+    grid = t_s[0] + period * np.arange(int(np.floor(span / period + 1e-6)) + 1)
     grid = np.minimum(grid, t_s[-1])  # rounding may put the last point a hair past the data
     pos = np.stack([np.interp(grid, t_s, position[:, k]) for k in range(3)], axis=1)
     rot = Slerp(t_s, Rotation.from_quat(quat_xyzw))(grid)

@@ -370,3 +370,119 @@ def test_real_mit_push_bag():
     # /tip_pose (PoseStamped, empty frame_id) as the tracked frame cannot place link_ft
     with pytest.raises(LogError, match="frame 'link_ft' cannot be resolved"):
         read_recording(ST_1, {"pose": "/tip_pose", "wrench": "/netft_data"})
+
+
+def _write_messages(path: Path, pose_rows, wrench_rows, tip_rows=()) -> Path:
+    """An MCAP file of TransformStamped poses and world WrenchStamped messages written as given:
+    (sec, nanosec, position, quaternion) and (sec, nanosec, force, torque) rows, values unchecked;
+    `tip_rows` go to a second pose topic, /tip_pose."""
+    from mcap_ros2.writer import Writer
+
+    def header(sec, nanosec, frame):
+        return {"stamp": {"sec": int(sec), "nanosec": int(nanosec)}, "frame_id": frame}
+
+    def xyz(v):
+        return dict(zip("xyz", map(float, v)))
+
+    with open(path, "wb") as f:
+        w = Writer(f)
+        pose_schema = w.register_msgdef("geometry_msgs/msg/TransformStamped",
+                                        synth_recording.MSGDEFS["geometry_msgs/msg/TransformStamped"])
+        wrench_schema = w.register_msgdef("geometry_msgs/msg/WrenchStamped",
+                                          synth_recording.MSGDEFS["geometry_msgs/msg/WrenchStamped"])
+        for topic, child, rows in (("/tracker/pose", "gripper", pose_rows), ("/tip_pose", "tip", tip_rows)):
+            for sec, ns, p, q in rows:
+                msg = {"header": header(sec, ns, "world"), "child_frame_id": child,
+                       "transform": {"translation": xyz(p), "rotation": dict(zip("xyzw", map(float, q)))}}
+                w.write_message(topic, pose_schema, msg, log_time=sec * 10**9 + ns, publish_time=0)
+        for sec, ns, force, torque in wrench_rows:
+            msg = {"header": header(sec, ns, "world"), "wrench": {"force": xyz(force), "torque": xyz(torque)}}
+            w.write_message("/ft_sensor/wrench", wrench_schema, msg, log_time=sec * 10**9 + ns, publish_time=0)
+        w.finish()
+    return path
+
+
+def _rows(seconds, first, second):
+    """Rows stamped at `seconds` (after 100 s, so that no stamp is zero) holding `first` and `second`."""
+    return [(100 + int(s), int(round((s % 1) * 1e9)), first, second) for s in seconds]
+
+
+def test_a_stamp_far_from_the_rest_is_dropped_with_a_warning(tmp_path):
+    """One pose stamped at 2^31 s among stamps near 100 s would stretch the track over 68 years: it is
+    dropped, and the warning names the file, the topic and the count."""
+    t = np.linspace(0.0, 1.0, 50)
+    poses = _rows(t, (0.1, 0.2, 0.3), (0, 0, 0, 1))
+    poses.insert(20, (2**31 - 1, 0, (0.1, 0.2, 0.3), (0, 0, 0, 1)))
+    path = _write_messages(tmp_path / "far.mcap", poses, _rows(t, (1, 0, 0), (0, 0, 0)))
+    with pytest.warns(UserWarning, match=r"far\.mcap: /tracker/pose: dropped 1 sample stamped far"):
+        rec = read_recording(path)
+    assert len(rec.pose.t_s) == 50 and rec.pose.t_s[-1] == pytest.approx(101.0)
+    assert rec.duration_s == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_few_non_finite_wrench_samples_are_dropped_most_are_an_error(tmp_path, bad):
+    """Non-finite wrench values: a few are dropped with a warning naming file and topic; a stream
+    that is mostly non-finite is a LogError."""
+    t = np.linspace(0.0, 1.0, 20)
+    poses = _rows(t, (0.1, 0.2, 0.3), (0, 0, 0, 1))
+    wrenches = _rows(t, (1, 0, 0), (0, 0, 0))
+    wrenches[3] = (wrenches[3][0], wrenches[3][1], (bad, 0, 0), (0, 0, 0))
+    path = _write_messages(tmp_path / "few.mcap", poses, wrenches)
+    with pytest.warns(UserWarning, match=r"few\.mcap: /ft_sensor/wrench: dropped 1 sample"):
+        rec = read_recording(path)
+    assert len(rec.wrench.t_s) == 19
+    mostly = [(s, ns, f, (0, 0, bad) if k % 3 else tau) for k, (s, ns, f, tau) in enumerate(wrenches)]
+    path = _write_messages(tmp_path / "most.mcap", poses, mostly)
+    with pytest.raises(LogError, match=r"most\.mcap: /ft_sensor/wrench: 14 of 20 samples hold non-finite"):
+        read_recording(path)
+
+
+def test_a_broken_second_pose_topic_does_not_stop_the_read(tmp_path):
+    """A pusher tip's pose topic mostly NaN is no candidate for the tracked pose (a warning says why); the
+    good topic is read."""
+    t = np.linspace(0.0, 1.0, 20)
+    tips = _rows(t, (np.nan, 0, 0), (0, 0, 0, 1))[:15] + _rows(t[15:], (0.2, 0, 0), (0, 0, 0, 1))
+    path = _write_messages(tmp_path / "tip.mcap", _rows(t, (0.1, 0.2, 0.3), (0, 0, 0, 1)),
+                           _rows(t, (1, 0, 0), (0, 0, 0)), tips)
+    with pytest.warns(UserWarning, match=r"tip\.mcap: /tip_pose: 15 of 20 samples hold non-finite .* not taken"):
+        rec = read_recording(path)
+    assert rec.pose.topic == "/tracker/pose" and len(rec.pose.t_s) == 20
+
+
+@pytest.mark.parametrize("force, torque, what", [((1e300, 0, 0), (0, 0, 0), "force"),
+                                                 ((0, -2e5, 0), (0, 0, 0), "force"),
+                                                 ((1, 0, 0), (0, 0, 3e4), "torque")])
+def test_an_absurd_wrench_is_a_log_error(tmp_path, force, torque, what):
+    """A wrench beyond 1e5 N or 1e4 N m is no measurement (it would end as a singular fit): a LogError
+    naming the file and the topic."""
+    t = np.linspace(0.0, 1.0, 20)
+    wrenches = _rows(t, (1, 0, 0), (0, 0, 0))
+    wrenches[5] = (wrenches[5][0], wrenches[5][1], force, torque)
+    path = _write_messages(tmp_path / "huge.mcap", _rows(t, (0.1, 0.2, 0.3), (0, 0, 0, 1)), wrenches)
+    with pytest.raises(LogError, match=rf"huge\.mcap: /ft_sensor/wrench: {what} of .* beyond") as err:
+        read_recording(path)
+    assert "\n" not in str(err.value)
+
+
+def test_pose_and_wrench_that_do_not_overlap_in_time_are_a_log_error(tmp_path):
+    """Poses over 100..101 s and wrenches over 200..201 s (two clocks): a LogError naming both ranges."""
+    t = np.linspace(0.0, 1.0, 20)
+    path = _write_messages(tmp_path / "apart.mcap", _rows(t, (0.1, 0.2, 0.3), (0, 0, 0, 1)),
+                           _rows(t + 100, (1, 0, 0), (0, 0, 0)))
+    with pytest.raises(LogError, match=r"apart\.mcap: pose topic /tracker/pose stamps 100\.000\.\.101\.000 s and "
+                                       r"wrench topic /ft_sensor/wrench stamps 200\.000\.\.201\.000 s do not overlap"):
+        read_recording(path)
+
+
+def test_uniform_pose_grid_refuses_a_span_it_cannot_hold():
+    """A stray stamp at 2^31 s behind 50 samples 20 ms apart would take 10^11 grid samples (terabytes): the
+    grid refuses, naming the span, instead of allocating."""
+    from pipelines.identify.windows import uniform_pose_grid
+
+    t = np.r_[np.linspace(0.0, 1.0, 50), 2.0**31]
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1))
+    with pytest.raises(ValueError, match=r"0\.000\.\.2147483648\.000 s \(2\.15e\+09 s\)"):
+        uniform_pose_grid(t, np.zeros((len(t), 3)), quat)
+    grid, _, _ = uniform_pose_grid(t[:-1], np.zeros((len(t) - 1, 3)), quat[:-1])
+    assert len(grid) == 50

@@ -125,3 +125,26 @@ def test_real_kinect_frames_are_posed(tmp_path):
     scan = read_scan(root, poses="estimate", posing=config)
     errors = pose_errors(_poses(scan), scan.given_T_world_camera)
     assert errors.relative_rotation_deg.max() < 1.0 and errors.relative_translation_m.max() < 0.03
+
+
+def test_pose_free_frame_with_damaged_colour_is_posed_from_depth(sweep, tmp_path):
+    """A colour image whose header reads but whose data is broken (Pillow: SyntaxError) costs only the
+    RGB-D odometry start of its frame; the frames are still posed."""
+    from PIL import Image
+
+    root = tmp_path / "posefree"
+    shutil.copytree(sweep, root)
+    meta = json.loads((root / "transforms.json").read_text())
+    for frame in meta["frames"]:
+        del frame["transform_matrix"]
+    (root / "transforms.json").write_text(json.dumps(meta))
+    colour = root / meta["frames"][1]["file_path"]
+    with Image.open(colour) as im:
+        im.save(colour, format="PNG")  # keeps the name: Pillow reads the content
+    data = bytearray(colour.read_bytes())
+    data[36] = 0  # the length of the chunk after IHDR
+    colour.write_bytes(bytes(data))
+    config = PosingConfig(neighbour_count=0, model_rounds=0, initial_guesses=("identity", "rgbd_odometry"))
+    scan = read_scan(root, posing=config)
+    assert scan.pose_source == "estimated"
+    assert all(np.isfinite(f.T_world_camera).all() for f in scan.frames)

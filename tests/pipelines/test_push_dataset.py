@@ -77,3 +77,85 @@ def test_bad_trial_files_name_the_file_and_the_fault(tmp_path):
     junk.write_bytes(b"not hdf5")
     with pytest.raises(LogError, match=r"junk\.h5: not a readable HDF5 file"):
         read_push_trial(junk)
+
+
+TRIAL = "motion_surface=abs_shape=rect1_a=0_v=10_i=0.000_s=0.000_t=0.698"
+
+
+def _trial(n: int = 20) -> dict[str, np.ndarray]:
+    """A push along x at 10 mm/s for 1 s, each stream on its own clock, as the dataset holds them."""
+    s = np.linspace(0.0, 1.0, n)
+    t, zero = 1.46e9 + s, np.zeros(n)
+    return {"object_pose": np.c_[t, 0.3 + 0.01 * s, zero, zero],
+            "tip_pose": np.c_[t + 0.002, 0.25 + 0.01 * s, zero, zero],
+            "ft_wrench": np.c_[t + 0.001, np.full(n, -1.0), zero, zero]}
+
+
+def _write_json(path: Path, doc) -> Path:
+    import json
+
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.mark.parametrize("doc, fault", [
+    (5, "expected an object holding .* got a number"),
+    (None, "expected an object holding .* got null"),
+    ([], "expected an object holding .* got a list"),
+    ({"object_pose": [[0, 0, 0, 0]] * 2, "ft_wrench": [[0, 0, 0, 0]] * 2, "tip_pose": {}},
+     "tip_pose: expected an N x 4 array of numbers, got an object"),
+    ({"object_pose": [[0, 0, 0, 0], [1, 0, 0, 0]], "ft_wrench": [[0, 0, 0, 0], [1, 0, 0, 0]],
+      "tip_pose": [[0, 0, "x", 0], [1, 0, 0, 0]]}, "tip_pose: expected"),
+    ({"object_pose": [[0, 0, 0, 0], [1, 0, 0, 0]], "ft_wrench": [[0, 0, 0, 0], [1, 0, 0]],
+      "tip_pose": [[0, 0, 0, 0], [1, 0, 0, 0]]}, "ft_wrench: expected"),
+    ({"object_pose": [[0, 0, 0, 0], [0, 1, 0, 0]], "ft_wrench": [[0, 0, 0, 0], [1, 0, 0, 0]],
+      "tip_pose": [[0, 0, 0, 0], [1, 0, 0, 0]]}, "object_pose: 1 distinct stamp"),
+])
+def test_json_trials_of_the_wrong_shape_are_log_errors(tmp_path, doc, fault):
+    """A document that is no object, or a key that is no N x 4 numeric array with two distinct stamps, is a
+    LogError naming the file and the key (not a TypeError from deep inside numpy)."""
+    path = _write_json(tmp_path / f"{TRIAL}.json", doc)
+    with pytest.raises(LogError, match=rf"{TRIAL}\.json: {fault}") as err:
+        read_push_trial(path)
+    assert "\n" not in str(err.value)
+
+
+def test_h5_trial_whose_key_is_a_group_or_text_is_a_log_error(tmp_path):
+    """`tip_pose` as an HDF5 group, as strings, or as an empty dataset: LogErrors naming file and key."""
+    import h5py
+
+    def write(name, tip):
+        path = tmp_path / name
+        with h5py.File(path, "w") as h5:
+            for k, v in _trial().items():
+                if k != "tip_pose":
+                    h5[k] = v
+            tip(h5)
+        return path
+
+    with pytest.raises(LogError, match=r"group\.h5: tip_pose: expected an N x 4 array of numbers, got an HDF5 group"):
+        read_push_trial(write("group.h5", lambda h5: h5.create_group("tip_pose")))
+    with pytest.raises(LogError, match=r"text\.h5: tip_pose: expected .* numbers, got text"):
+        read_push_trial(write("text.h5", lambda h5: h5.create_dataset("tip_pose", data=np.array([b"a"] * 8))))
+    with pytest.raises(LogError, match=r"empty\.h5: tip_pose: expected .* numbers, got an empty dataset"):
+        read_push_trial(write("empty.h5", lambda h5: h5.create_dataset("tip_pose", data=h5py.Empty("f8"))))
+
+
+def test_push_trial_values_out_of_reason_are_log_errors_and_far_stamps_warnings(tmp_path):
+    """A force of 1e300 N is a LogError naming the key; object and force streams on clocks that never
+    overlap are a LogError naming both ranges; a stray stamp is dropped with a warning."""
+    doc = {k: v.tolist() for k, v in _trial().items()}
+    doc["ft_wrench"][4][1] = 1e300
+    with pytest.raises(LogError, match=rf"{TRIAL}\.json: ft_wrench: force of 1e\+300 N"):
+        read_push_trial(_write_json(tmp_path / f"{TRIAL}.json", doc))
+
+    apart = {k: v.tolist() for k, v in _trial().items()}
+    apart["ft_wrench"] = (np.array(apart["ft_wrench"]) + [100.0, 0, 0, 0]).tolist()
+    with pytest.raises(LogError, match=r"object_pose stamps .* and ft_wrench stamps .* do not overlap"):
+        read_push_trial(_write_json(tmp_path / f"{TRIAL}.json", apart))
+
+    stray = {k: v.tolist() for k, v in _trial().items()}
+    stray["object_pose"][7][0] = 2.0**31 * 1e3
+    with pytest.warns(UserWarning, match=rf"{TRIAL}\.json: object_pose: dropped 1 sample stamped far"):
+        rec = read_push_trial(_write_json(tmp_path / f"{TRIAL}.json", stray))
+    assert len(rec.pose.t_s) == 19 and rec.duration_s < 2.0

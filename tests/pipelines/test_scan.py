@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
+import struct
+import warnings
+import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
-from pipelines.scan import ScanError, read_scan
+from pipelines.scan import OPENCV_FROM_OPENGL, ScanError, read_scan
 
 W, H = 8, 6
 
@@ -478,3 +481,231 @@ def test_reads_real_kinect_frames(tmp_path):
     raw = np.loadtxt(REAL_7SCENES / "frame-000500.pose.txt")
     np.testing.assert_allclose(scan.frames[2].T_world_camera[:3, 3], raw[:3, 3])
     np.testing.assert_allclose(scan.frames[2].T_world_camera[:3, :3], raw[:3, :3], atol=1e-3)
+
+
+# ---------------------------------------------------------------------------------------------
+# hostile files: each raises ScanError naming the file, never another exception
+
+
+def _write_raw(root: Path, text_edit) -> None:
+    """Edit transforms.json as text (json.dumps cannot write what some of these cases need)."""
+    path = root / "transforms.json"
+    path.write_text(text_edit(path.read_text()))
+
+
+_HUGE = "9" * 400
+
+
+@pytest.mark.parametrize("edit,words", [
+    (lambda t: t.replace('"fl_x": 10.0', f'"fl_x": {_HUGE}'), "'fl_x' must be a finite number, got an integer of 400"),
+    (lambda t: t.replace('"fl_x": 10.0', f'"fl_x": 10.0, "depth_unit_scale_factor": {_HUGE}'),
+     "depth_unit_scale_factor must be a finite number"),
+    (lambda t: t.replace('"transform_matrix": [[1.0', f'"transform_matrix": [[{_HUGE}', 1), "non-finite"),
+    (lambda t: t.replace('"fl_x": 10.0', '"fl_x": ' + "9" * 5000), "not readable JSON"),
+    (lambda t: t.replace('"fl_x": 10.0', '"fl_x": ' + "[" * 100000 + "]" * 100000), "not readable JSON"),
+], ids=["400-digit focal", "400-digit depth scale", "400-digit pose entry", "5000-digit integer", "deep nesting"])
+def test_huge_numbers_and_deep_nesting_raise_scan_error(tmp_path, edit, words):
+    """Integers beyond a float, beyond Python's digit limit, or nesting beyond its recursion limit: ScanError."""
+    root = _write_scan(tmp_path / "s")
+    _write_raw(root, edit)
+    with pytest.raises(ScanError) as info:
+        read_scan(root)
+    message = str(info.value)
+    assert message.startswith(str((root / "transforms.json").resolve())), message
+    assert words in message and "\n" not in message and len(message) < 500
+
+
+def test_deeply_nested_object_json_raises(tmp_path):
+    root = _write_scan(tmp_path / "s")
+    (root / "object.json").write_text("[" * 100000 + "]" * 100000)
+    with pytest.raises(ScanError, match="not readable JSON") as info:
+        read_scan(root)
+    assert str(info.value).startswith(str((root / "object.json").resolve()))
+
+
+@pytest.mark.parametrize("edit,words", [
+    (_set("w", 1e300), "megapixels"),
+    (lambda m: m.update(w=10_000, h=10_000, cx=5000.0, cy=5000.0), "megapixels"),
+    (_set("fl_x", 1e-12), "field of view"),
+    (_set_frame("transform_matrix", [[1, 0, 0, 1e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+     "from the world origin"),
+    (_set_frame("transform_matrix", [[1e300, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]), "not rigid"),
+    (_set_frame("file_path", "images/\0.png"), "not a usable path"),
+    (_set_frame("file_path", "x" * 5000), "not a usable path"),
+    (_set("camera_model", ["x" * 1000]), "camera_model"),
+], ids=["w 1e300", "100 megapixels", "tiny focal", "far camera", "huge rotation", "NUL in path", "long path",
+        "long camera model"])
+def test_implausible_values_raise_scan_error(tmp_path, edit, words):
+    """Values no camera or scan has are refused before they reach the maths (or an allocation)."""
+    root = _write_scan(tmp_path / "s")
+    _edit(root, edit)
+    with pytest.raises(ScanError) as info:
+        read_scan(root)
+    message = str(info.value)
+    assert message.startswith(str((root / "transforms.json").resolve())), message
+    assert words in message and "\n" not in message and len(message) < 500
+
+
+def _png_claiming(path: Path, width: int, height: int) -> None:
+    """Rewrite a PNG's header to claim another size (with a valid checksum), keeping its pixel data."""
+    data = bytearray(path.read_bytes())
+    data[16:24] = struct.pack(">II", width, height)
+    data[29:33] = struct.pack(">I", zlib.crc32(bytes(data[12:29])))
+    path.write_bytes(bytes(data))
+
+
+def _bomb(name, width, height, words):
+    def damage(root):
+        _png_claiming(root / name, width, height)
+        return root / name, words
+
+    return damage
+
+
+def _broken_chunk(name):
+    """A zeroed byte in the first chunk after IHDR: Pillow raises SyntaxError ("broken PNG file")."""
+    def damage(root):
+        data = bytearray((root / name).read_bytes())
+        data[36] = 0
+        (root / name).write_bytes(bytes(data))
+        return root / name, "cannot read image"
+
+    return damage
+
+
+def _truncated(name):
+    def damage(root):
+        data = (root / name).read_bytes()
+        (root / name).write_bytes(data[: len(data) // 2])
+        return root / name, "cannot read image"
+
+    return damage
+
+
+def _npy_header(shape: str, key: str = "'shape'"):
+    """A .npy depth (of 96 bytes of data) whose header claims another shape, or has another key."""
+    def damage(root):
+        path = root / "depth/1.npy"
+        np.save(path, np.full((H, W), 500, np.uint16))
+        data = path.read_bytes()
+        header_end = 10 + int.from_bytes(data[8:10], "little")
+        header = data[10:header_end].decode("latin1").replace(f"({H}, {W})", shape).replace("'shape'", key)
+        header = header.rstrip("\n ").ljust(header_end - 11) + "\n"
+        path.write_bytes(data[:10] + header.encode("latin1") + data[header_end:])
+        _edit(root, _set_frame("depth_file_path", "depth/1.npy", 1))
+        return path, "cannot read depth array"
+
+    return damage
+
+
+_HOSTILE_FILES = [
+    _bomb("depth/1.png", 100_000, 100_000, "cannot read image"),  # beyond Pillow's decompression-bomb limit
+    _bomb("masks/1.png", 100_000, 100_000, "cannot read image"),
+    _bomb("images/1.png", 100_000, 100_000, "cannot read image"),
+    _bomb("depth/1.png", 9000, 9000, "w x h"),  # under Pillow's limit: refused by size before decoding
+    _bomb("masks/1.png", 9000, 9000, "w x h"),
+    _broken_chunk("masks/1.png"),
+    _broken_chunk("depth/1.png"),
+    _truncated("depth/1.png"),
+    _truncated("masks/1.png"),
+    _npy_header("(99999, 99999)"),  # 20 GB
+    _npy_header("(99999999999999999999, 3)"),  # beyond a C long: OverflowError in numpy
+    _npy_header(f"({H}, {W})", key="[]"),  # an unhashable key: TypeError in numpy
+]
+
+
+_HOSTILE_IDS = ["depth bomb", "mask bomb", "colour bomb", "depth 9000x9000", "mask 9000x9000", "mask broken chunk",
+                "depth broken chunk", "depth truncated", "mask truncated", "npy 20 GB", "npy beyond C long",
+                "npy list as key"]
+
+
+@pytest.mark.parametrize("damage", _HOSTILE_FILES, ids=_HOSTILE_IDS)
+def test_hostile_images_raise_scan_error_naming_them(tmp_path, damage):
+    """Damaged or oversized image headers raise ScanError naming the image; no pixels are decoded first."""
+    _assert_damage_named(_write_scan(tmp_path / "s"), damage)
+
+
+def _far_7scenes_pose(root):
+    T = np.eye(4)
+    T[0, 3] = 1e300
+    (root / "frame-000001.pose.txt").write_text(_pose_text(T))
+    return root / "frame-000001.pose.txt", "from the world origin"
+
+
+def _ragged_pose(root):
+    (root / "frame-000001.pose.txt").write_text("1 0 0 0\n0 1 0\n0 0 1 0\n0 0 0 1\n")
+    return root / "frame-000001.pose.txt", "got 4 rows of [3, 4] numbers"
+
+
+def _binary_pose(root):
+    (root / "frame-000001.pose.txt").write_bytes(b"\xff\xfe\x00\x81")
+    return root / "frame-000001.pose.txt", "cannot read"
+
+
+def _wide_k(root):
+    (root / "camera-intrinsics.txt").write_text("0.001 0 4\n0 11 3\n0 0 1\n")
+    return root / "camera-intrinsics.txt", "field of view"
+
+
+_HOSTILE_7SCENES = [
+    _far_7scenes_pose,
+    _ragged_pose,
+    _binary_pose,
+    _wide_k,
+    _bomb("frame-000000.depth.png", 100_000, 100_000, "cannot read image"),
+    _bomb("frame-000000.depth.png", 9000, 9000, "megapixels"),  # the first depth image gives the camera's size
+    _bomb("frame-000001.depth.png", 9000, 9000, "w x h"),
+    _broken_chunk("frame-000001.depth.png"),
+]
+
+
+@pytest.mark.parametrize("damage", _HOSTILE_7SCENES, ids=["far pose", "ragged pose", "binary pose", "wide K",
+                                                          "first depth bomb", "first depth 81 MP", "depth 9000x9000",
+                                                          "depth broken chunk"])
+def test_hostile_7scenes_files_raise_scan_error_naming_them(tmp_path, damage):
+    """Damaged 7-Scenes files raise ScanError that starts with their path."""
+    _assert_damage_named(_write_7scenes(tmp_path / "s"), damage)
+
+
+# ---------------------------------------------------------------------------------------------
+# views that cannot close the object: a warning, not an error
+
+
+def _write_ring(root: Path, azimuths_deg, elevation_deg: float = 30.0) -> Path:
+    """The tiny scan with its cameras on a ring 0.3 m around the origin, looking at it (the masked patch)."""
+    from pipelines.synth.render import look_at
+
+    _write_scan(root, frame_count=len(azimuths_deg))
+
+    def ring(meta):
+        el = np.radians(elevation_deg)
+        for frame, az in zip(meta["frames"], np.radians(azimuths_deg)):
+            eye = 0.3 * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+            frame["transform_matrix"] = (look_at(eye, (0.0, 0.0, 0.0)) @ OPENCV_FROM_OPENGL).tolist()
+
+    _edit(root, ring)
+    return root
+
+
+@pytest.mark.parametrize("root,words", [
+    (lambda p: _write_scan(p, frame_count=1), "1 view; at least 3 around the object are needed to close it"),
+    (lambda p: _write_ring(p, (0, 120, 240), elevation_deg=80), "all 3 views look at the object from above"),
+    (lambda p: _write_ring(p, (0, 30, 60, 90)), "the 4 views leave a 270 deg gap"),
+    (lambda p: _write_ring(p, (0, 110, 230)), "the 3 views leave a 130 deg gap"),
+], ids=["one view", "from above", "one side", "gap of 130 deg"])
+def test_views_that_cannot_close_the_object_warn(tmp_path, root, words):
+    """A single view, views from above only, or a gap over 120 deg: a warning naming the scan directory."""
+    root = root(tmp_path / "s")
+    with pytest.warns(UserWarning, match="needed to close it") as record:
+        scan = read_scan(root)
+    message = str(record[0].message)
+    assert message.startswith(f"{root.resolve()}: ") and words in message, message
+    assert len(scan.frames) >= 1
+
+
+def test_views_all_around_do_not_warn(tmp_path):
+    """Views at most 120 deg apart around the object read without a warning."""
+    root = _write_ring(tmp_path / "s", (0, 100, 200, 290))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_scan(root)

@@ -1,0 +1,8 @@
+"""The readers `twin bench fuzz` and the suite's fuzz tests cover, by name."""
+
+from __future__ import annotations
+
+from twin.bench.fuzz_logs import LOG_TARGETS
+from twin.bench.fuzz_scan import SCAN_TARGETS
+
+TARGETS = {**SCAN_TARGETS, **LOG_TARGETS}
