@@ -8,17 +8,18 @@ and validated, so a failed build leaves a previous OUT untouched.
 from __future__ import annotations
 
 import json
-import shutil
+import os
+import sys
 import tempfile
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Literal
 
 import numpy as np
 
-MESH_SUFFIXES = (".obj", ".stl", ".ply", ".glb")
+from twin.output import staged_output
 
 
 class BuildError(RuntimeError):
@@ -57,6 +58,12 @@ class BuildConfig:
     """The wrench messages give the force on the sensor (the object's reaction): negate them."""
     push_min_speed_m_s: float = 0.01
     """Pushed objects: a window is fitted only where the object's median speed exceeds this [m/s]."""
+    force: bool = False
+    """Write into an existing folder that holds files twin did not write (they are kept)."""
+    mesh_units: str | None = None
+    """Length unit of a mesh SOURCE ("m", "cm", "mm", "in"); None: metres."""
+    mass_kg: tuple[float, float] | None = None
+    """The object's weighed mass and its standard uncertainty [kg], a measurement the fit uses."""
 
     def read(self, path: Path):
         """One recording, read with this build's topic, frame and rotation options (MCAP), or a
@@ -74,53 +81,56 @@ class BuildConfig:
 
 @dataclass
 class StageTimer:
-    """Wall time per stage, reported live through `log`."""
+    """Wall time per stage, reported through `log`; on a terminal a spinner with the elapsed time shows
+    that a long stage (reconstruction, decomposition, identification, diagnosis) is alive."""
 
     log: Callable[[str], None]
     seconds: dict = field(default_factory=dict)
+    live: bool = False
 
     def run(self, name: str, fn, *args, **kwargs):
         self.log(f"{name} ...")
         t0 = time.perf_counter()
-        out = fn(*args, **kwargs)
+        with _spinner(name) if self.live else nullcontext():
+            out = fn(*args, **kwargs)
         self.seconds[name] = time.perf_counter() - t0
         self.log(f"{name} done in {self.seconds[name]:.1f} s")
         return out
 
 
+@contextmanager
+def _spinner(name: str):
+    from rich.console import Console
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    # transient and on stderr: the log lines on stdout stay as they are, in a file or a CI log alike
+    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
+                  console=Console(stderr=True), transient=True, redirect_stdout=True) as progress:
+        progress.add_task(name, total=None)
+        yield
+
+
 def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     """Run every stage and write config.output atomically; returns the output directory."""
-    from assets import (
-        Asset, Estimate, Fit, Geometry, Material, Pose, Theta, asset_to_json, write_asset,
-    )
-    from assets.materials import material_range
-    from exporters import export_all
+    from twin.checks import check_build
+
+    check_build(config)  # within the first second, before the heavy imports
+    from assets import Pose
     from pipelines.decompose import DecomposeConfig, decompose
-    from pipelines.diagnose import CANDIDATES, DiagnoseConfig, diagnose_held
-    from pipelines.identify import IdentifyConfig, InertialBounds, identify_held, tracked_to_object
+    from pipelines.identify.kind import detect_kind
     from pipelines.priors import VlmConfig, ask_vlm, describe_object, estimate_prior, scan_image
-    from pipelines.validate import validate_exports
 
     t_start = time.perf_counter()
-    timer = StageTimer(log)
-    if not config.logs:
-        raise BuildError("no recording given: pass --logs TRIAL.mcap")
-    if config.vlm and not config.vlm_model:
-        raise BuildError(f"--vlm {config.vlm} needs --vlm-model NAME")
-    for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
-        if not Path(path).exists():
-            raise BuildError(f"{path}: recording not found")
-    if config.base_mesh and not Path(config.base_mesh).is_file():
-        raise BuildError(f"{config.base_mesh}: base mesh not found")
+    timer = StageTimer(log, live=sys.stderr.isatty() and not os.environ.get("CI"))
 
-    # Recordings are read first: they are quick, and a bad file should fail before minutes of geometry.
+    # The inputs are read first: they are quick, and a bad file should fail before minutes of geometry.
+    source = timer.run("scan" if Path(config.source).is_dir() else "mesh", _read_source, config)
+    choice = choose_material(config.material, source[0].material_hint if isinstance(source, list) else None, log)
     trials = [timer.run(f"logs {p.name}", config.read, p) for p in config.logs]
     holdout = timer.run(f"logs {config.holdout.name}", config.read, config.holdout) if config.holdout else None
-    from pipelines.identify.kind import detect_kind
-
     detection = timer.run("kind", detect_kind, trials[0], config.kind)
     log(f"motion: {detection.kind}" + (" (--kind)" if detection.forced else f" (BIC {detection.bic})"))
-    mesh_world, name, hint, scan_stats = timer.run("scan + reconstruct", _object_mesh, config)
+    mesh_world, name, scan_stats = timer.run("reconstruct", _object_mesh, config, source)
     for session in scan_stats.get("sessions", [])[1:]:
         r = session["registration"]
         log(f"session {session['root']}: registered with fitness {r['fitness']:.3f}, RMSE {1000 * r['rmse_m']:.2f} mm")
@@ -132,20 +142,51 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     parts = timer.run(
         "decompose", decompose, mesh_object, DecomposeConfig(), cache_dir=Path(config.cache_dir) / "coacd"
     )
-    named = config.material or hint
+    named = choice.entry.name if choice.entry else None
     guess = None
     if config.vlm:  # any failure is a warning and None: the build goes on with the offline prior
         vlm = VlmConfig(url=config.vlm, model=config.vlm_model, cache_dir=Path(config.cache_dir) / "vlm")
         guess = timer.run("vlm", ask_vlm, vlm, scan_image(config.source), describe_object(mesh_object, name, named))
         log(f"VLM: {guess.material}, {guess.mass_kg} kg, confidence {guess.confidence}" if guess else
             "VLM: no usable answer; using the offline prior")
-    prior = timer.run("priors", estimate_prior, mesh_object, material_range(named) if named else None, guess)
-    material = prior.material
+    prior = timer.run("priors", estimate_prior, mesh_object, choice.entry, guess, weighed=config.mass_kg)
+    if choice.entry is None and prior.details["fusion"]["material_from"] == "vlm":
+        choice = replace(choice, source="vlm")
     if detection.joint is not None:
         from twin.jointed import build_jointed
 
-        return build_jointed(config, trials, holdout, detection, mesh_object, placement, parts, prior, name,
-                             scan_stats, timer, log, t_start)
+        return build_jointed(config, trials, holdout, detection, mesh_object, placement, parts, prior, choice,
+                             name, scan_stats, timer, log, t_start)
+    return _build_body(config, trials, holdout, detection, mesh_object, placement, parts, prior, choice, name,
+                       scan_stats, timer, log, t_start)
+
+
+@contextmanager
+def kind_hint(detection, recording):
+    """An identification that fails on a kind the motion only suggested names the option that would help:
+    a pushed block read as held, say, ends in a singular fit rather than in anything a user can act on."""
+    try:
+        yield
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+        if detection.forced or isinstance(exc, BuildError):
+            raise
+        others = [k for k in ("free", "sliding", "prismatic", "revolute") if k != detection.kind]
+        raise BuildError(f"{recording.path}: identification as a {detection.kind} body failed ({exc}); the kind was "
+                         f"read from the motion: if the object was not {detection.kind}, pass --kind "
+                         f"{'|'.join(others)}") from exc
+
+
+def _build_body(config, trials, holdout, detection, mesh_object, placement, parts, prior, choice, name, scan_stats,
+                timer, log, t_start) -> Path:
+    """A free or pushed body from its recordings to the written output."""
+    from assets import Asset, Estimate, Fit, Geometry, Theta, asset_to_json, write_asset
+    from exporters import export_all
+    from pipelines.diagnose import CANDIDATES, DiagnoseConfig, diagnose_held
+    from pipelines.identify import (
+        IdentifyConfig, InertialBounds, identify_held, tracked_to_object, with_weighed_mass,
+    )
+    from pipelines.validate import validate_exports
+    from twin.summary import bounds_flags
 
     diagnosis = None
     if detection.kind == "sliding":
@@ -154,7 +195,8 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
 
         body, mu_prior = _sliding_body(mesh_object, prior)
         sconfig = SlidingConfig(moving_speed_m_s=config.push_min_speed_m_s)
-        pushed = timer.run("identify", identify_pushed, trials, holdout, body, mu_prior, sconfig)
+        with kind_hint(detection, trials[0]):
+            pushed = timer.run("identify", identify_pushed, trials, holdout, body, mu_prior, sconfig)
         refit = None
         if config.diagnose:
             diagnosis, refit = timer.run("diagnose", diagnose_pushed, trials, [holdout] if holdout else [], body,
@@ -162,16 +204,18 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             _log_diagnosis(diagnosis, log)
         theta, fit, identify_provenance, loss_history, traces = _sliding_result(pushed, refit, diagnosis, body,
                                                                                  prior)
+        theta = weighed_where_prior(theta, config.mass_kg)
         log(f"  friction {theta.friction.value:.3f} +- {theta.friction.std:.3f} "
             f"({identify_provenance['identify']['friction_from']})")
     else:
         X_tracked_body = tracked_to_object(trials[0], placement)
         id_config = IdentifyConfig(window_s=config.window_s, max_iterations=config.max_iterations,
                                    optimizer=config.optimizer)
-        held = timer.run(
-            "identify", identify_held, trials, holdout, X_tracked_body, prior.inertial,
-            InertialBounds(prior.lower, prior.upper), id_config, config.method, _progress_logger(log),
-        )
+        with kind_hint(detection, trials[0]):
+            held = timer.run(
+                "identify", identify_held, trials, holdout, X_tracked_body, prior.inertial,
+                InertialBounds(prior.lower, prior.upper), id_config, config.method, _progress_logger(log),
+            )
         if held.selected != config.method and config.method == "newton":
             log("the Newton fit does not predict the held-out recording significantly better: keeping least squares")
         inertial, covariance = held.inertial, held.covariance
@@ -185,6 +229,9 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
                 inertial, fit_final = diagnosis.inertial["after"], diagnosis.fits["after"]
                 fit_baseline = diagnosis.fits["before"]
 
+        if config.mass_kg is not None:
+            inertial, covariance = with_weighed_mass(inertial, covariance, *config.mass_kg)
+            log(f"  with the weighed {config.mass_kg[0]:.4g} kg: mass {inertial.mass:.4g} kg")
         std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
         inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])
         ci = lambda v, s: (np.asarray(v) - 1.96 * np.asarray(s), np.asarray(v) + 1.96 * np.asarray(s))  # noqa: E731
@@ -207,7 +254,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
         }
 
     out = Path(config.output)
-    with staged_output(out) as tmp:
+    with staged_output(out, config.force) as tmp:
         collision = _write_meshes(tmp, mesh_object, parts)
         asset = Asset(
             name=name,
@@ -215,10 +262,12 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
             placement=placement,
             theta=theta,
             geometry=Geometry("meshes/visual.obj", collision),
-            material=Material(material.name, float(theta.mass.value / mesh_object.volume), theta.friction.value),
+            material=choice.material(prior.material.name, float(theta.mass.value / mesh_object.volume),
+                                     theta.friction.value),
             fit=fit,
             effects=diagnosis.effects if diagnosis else (),
             unexplained=diagnosis.unexplained if diagnosis else (),
+            flags=bounds_flags(theta, prior.lower, prior.upper),
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), "report": "report.html"}
@@ -239,8 +288,65 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
 
         write_report(tmp / "report.html", asset_to_json(asset), loss_history, traces,
                      diagnosis.traces if diagnosis else None)
+    log_summary(asset_to_json(asset), log)
     log(f"wrote {out}/ in {time.perf_counter() - t_start:.1f} s")
     return out
+
+
+def weighed_where_prior(theta, weighed: tuple[float, float] | None):
+    """A mass the recordings could not determine is the user's weighing, said so, rather than the prior's."""
+    from assets import Estimate
+
+    if weighed is None or theta.mass.source != "prior":
+        return theta
+    mass, std = weighed
+    return replace(theta, mass=Estimate(mass, std, source="weighed", interval95=(mass - 1.96 * std, mass + 1.96 * std),
+                                        prior=theta.mass.prior))
+
+
+def log_summary(doc: dict, log) -> None:
+    from twin.summary import summary_lines
+
+    log("summary:")
+    for line in summary_lines(doc):
+        log(f"  {line}")
+
+
+@dataclass(frozen=True)
+class MaterialChoice:
+    """The library entry the prior starts from, and how the user's words led to it (asset.json `material`)."""
+
+    entry: object | None
+    """The `MaterialRange`, or None for the wide `unknown` prior."""
+    text: str | None
+    source: str
+    """"named" (--material), "hint" (object.json), "unmatched" (a hint the library does not know), "vlm",
+    or "library" (no words given)."""
+    score: float | None
+
+    def material(self, name: str, density: float, friction: float):
+        from assets import Material
+
+        return Material(name, density, friction, text=self.text, source=self.source, match_score=self.score)
+
+
+def choose_material(named: str | None, hint: str | None, log) -> MaterialChoice:
+    """--material must match the library (checked before the build starts); an object.json hint that matches
+    nothing is a warning and the wide prior, never a failed build."""
+    from assets.materials import MATCH_THRESHOLD, match_material, material_range, suggest_materials
+
+    if named is not None:
+        match = match_material(named)
+        return MaterialChoice(material_range(named), named, "named", match.score if match.name else None)
+    if hint is None:
+        return MaterialChoice(None, None, "library", None)
+    match = match_material(hint)
+    if match.name is None or match.score < MATCH_THRESHOLD:
+        log(f"warning: object.json material {hint!r} matches nothing in the library (nearest: "
+            f"{', '.join(suggest_materials(hint))}); using the wide prior of an unknown material")
+        return MaterialChoice(None, hint, "unmatched", 0.0)
+    log(f"material {hint!r} read as {match.name} ({match.how}, match {match.score:.2f})")
+    return MaterialChoice(material_range(match.name), hint, "hint", match.score)
 
 
 def _sliding_body(mesh_object, prior):
@@ -351,17 +457,20 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
     """
     from assets import Inertial, Pose, asset_to_json, read_asset, write_asset
     from pipelines.diagnose import DiagnoseConfig, diagnose_held
+    from twin.checks import check_recording_path
     from twin.report import write_report
 
     out = Path(config.output)
     if not (out / "asset.json").is_file():
         raise BuildError(f"{out}/asset.json: not found; run `twin build` into {out} first")
     if not config.logs:
-        raise BuildError("no recording given: pass --logs TRIAL.mcap")
-    for path in (*config.logs, *((config.holdout,) if config.holdout else ())):
-        if not Path(path).exists():
-            raise BuildError(f"{path}: recording not found")
+        raise BuildError("--logs: no recording given; pass --logs TRIAL.mcap")
+    for path in config.logs:
+        check_recording_path(path)
+    if config.holdout:
+        check_recording_path(config.holdout, "--holdout")
     asset = read_asset(out / "asset.json")
+    timer = StageTimer(log, live=sys.stderr.isatty() and not os.environ.get("CI"))
     provenance = asset.provenance
     # the recordings are read with the options the asset was built with (topics, frames, sensor rotation)
     built = provenance.get("config", {})
@@ -396,64 +505,66 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
     if asset.kind == "sliding":
         from pipelines.diagnose import diagnose_pushed
 
-        diagnosis, _ = diagnose_pushed(trials, [holdout] if holdout else [], body, mu_prior, sconfig,
+        diagnosis, _ = timer.run("diagnose", diagnose_pushed, trials, [holdout] if holdout else [], body, mu_prior, sconfig,
                                        DiagnoseConfig(bootstraps=config.bootstraps))
     elif asset.joint is not None:
         joint = detect_kind(trials[0], asset.kind).joint
-        diagnosis, _ = diagnose_jointed(trials, holdout, joint, asset.placement, prior, jconfig,
+        diagnosis, _ = timer.run("diagnose", diagnose_jointed, trials, holdout, joint, asset.placement, prior, jconfig,
                                         DiagnoseConfig(bootstraps=config.bootstraps))
     else:
         prior = Inertial(uniform["mass_kg"], tuple(uniform["com_m"]), np.asarray(uniform["inertia_kg_m2"]))
         X_tracked_body = Pose(tuple(tracked["position"]), tuple(tracked["quaternion_xyzw"])).inverse()
-        diagnosis = diagnose_held(trials, holdout, X_tracked_body, prior,
+        diagnosis = timer.run("diagnose", diagnose_held, trials, holdout, X_tracked_body, prior,
                                   DiagnoseConfig(bootstraps=config.bootstraps,
                                                  window_s=asset.fit.window_s if asset.fit else 0.1))
     _log_diagnosis(diagnosis, log)
     run = {"logs": [str(p) for p in config.logs], "holdout": str(config.holdout) if config.holdout else None}
     asset = replace(asset, effects=diagnosis.effects, unexplained=diagnosis.unexplained,
                           provenance={**provenance, "diagnose": diagnosis.provenance() | {"run": run}})
-    write_asset(asset, out / "asset.json")
-    write_report(out / "report.html", asset_to_json(asset), (), None, diagnosis.traces)
+    # written beside and moved over: a reader, or an interrupt, sees the old files or the new ones
+    with tempfile.TemporaryDirectory(prefix=".twin-", dir=out) as tmp:
+        write_asset(asset, Path(tmp) / "asset.json")
+        write_report(Path(tmp) / "report.html", asset_to_json(asset), (), None, diagnosis.traces)
+        for name in ("asset.json", "report.html"):
+            os.replace(Path(tmp) / name, out / name)
     log(f"updated {out}/asset.json and report.html")
     return out
 
 
-def _object_mesh(config: BuildConfig):
-    """The watertight object mesh in world at its placement, its name, a material hint, stats."""
-    import trimesh
-
-    from pipelines.reconstruct import ReconstructConfig, reconstruct
+def _read_source(config: BuildConfig):
+    """The scan sessions (read and checked, not yet fused) or the mesh of SOURCE: quick, so a bad file
+    fails before the recordings are classified and minutes before the reconstruction would."""
     from pipelines.scan import read_scan
 
     source = Path(config.source)
-    if config.scans:
+    if source.is_dir():
+        return [read_scan(p) for p in (source, *config.scans)]
+    from pipelines.meshes import read_mesh
+
+    return read_mesh(source, config.mesh_units or "m")
+
+
+def _object_mesh(config: BuildConfig, source):
+    """The watertight object mesh in world at its placement, its name and stats."""
+    from pipelines.reconstruct import ReconstructConfig, reconstruct
+
+    if not isinstance(source, list):
+        return source, Path(config.source).stem, {"mesh_file": str(config.source),
+                                                  "mesh_units": config.mesh_units or "m"}
+    if len(source) > 1:
         from pipelines.sessions import SessionsConfig, merge_sessions
 
-        for path in (source, *config.scans):
-            if not Path(path).is_dir():
-                raise BuildError(f"{path}: --scan needs scan directories (SOURCE and each --scan), not a mesh file")
-        scans = [read_scan(p) for p in (source, *config.scans)]
         sessions_config = SessionsConfig()
-        rec = merge_sessions(scans, sessions_config)
-        stats = {"config": asdict(sessions_config), "frames": sum(len(s.frames) for s in scans),
+        rec = merge_sessions(source, sessions_config)
+        stats = {"config": asdict(sessions_config), "frames": sum(len(s.frames) for s in source),
                  "voxel_size_m": rec.voxel_size_m, **rec.stats}
-        return rec.mesh, scans[0].name, scans[0].material_hint, stats
-    if source.is_dir():
-        scan = read_scan(source)
-        reconstruct_config = ReconstructConfig()
-        rec = reconstruct(scan, reconstruct_config)
-        stats = {"config": asdict(reconstruct_config), "frames": len(scan.frames), "voxel_size_m": rec.voxel_size_m,
-                 **rec.stats}
-        return rec.mesh, scan.name, scan.material_hint, stats
-    if source.suffix.lower() in MESH_SUFFIXES and source.is_file():
-        try:
-            mesh = trimesh.load(source, force="mesh")
-        except Exception as exc:  # trimesh raises many types for bad files
-            raise BuildError(f"{source}: cannot read mesh ({exc})") from exc
-        if not mesh.is_volume:
-            raise BuildError(f"{source}: mesh is not watertight with consistent normals")
-        return mesh, source.stem, None, {"mesh_file": str(source)}
-    raise BuildError(f"{source}: not a scan directory or a mesh file ({', '.join(MESH_SUFFIXES)})")
+        return rec.mesh, source[0].name, stats
+    scan = source[0]
+    reconstruct_config = ReconstructConfig()
+    rec = reconstruct(scan, reconstruct_config)
+    stats = {"config": asdict(reconstruct_config), "frames": len(scan.frames), "voxel_size_m": rec.voxel_size_m,
+             **rec.stats}
+    return rec.mesh, scan.name, stats
 
 
 def _progress_logger(log):
@@ -462,20 +573,6 @@ def _progress_logger(log):
         if iteration <= 10 or iteration % 25 == 0:
             log(f"  iteration {iteration}: loss {loss:.6g}")
     return progress
-
-
-@contextmanager
-def staged_output(out: Path):
-    """A directory beside `out` to write into: it replaces `out` when the block completes and is removed
-    if the block fails, so a failed build leaves the previous `out` untouched."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    _replace_dir(tmp, out)
 
 
 def _write_meshes(tmp: Path, mesh_object, parts) -> tuple[str, ...]:
@@ -488,14 +585,3 @@ def _write_meshes(tmp: Path, mesh_object, parts) -> tuple[str, ...]:
         part.export(tmp / rel)
         collision.append(rel)
     return tuple(collision)
-
-
-def _replace_dir(new: Path, out: Path) -> None:
-    """Move `new` to `out`; an existing `out` is swapped aside first and removed last."""
-    old = None
-    if out.exists():
-        old = out.with_name(f".{out.name}.old-{time.time_ns()}")
-        out.rename(old)
-    new.rename(out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)

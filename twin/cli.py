@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
+import threading
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
@@ -17,17 +21,26 @@ class Build:
 
     source: tyro.conf.Positional[Path]
     """Scan directory (nerfstudio layout) or mesh file (.obj .stl .ply .glb, metres, world frame)."""
+    logs: tyro.conf.UseAppendAction[tuple[Path, ...]]
+    """MCAP recording of an interaction (or a MIT pushing-dataset .h5/.json trial); repeat for several trials."""
     scan: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
     """Another scan session of the same object in another resting pose (turned over, on its side), merged with
     SOURCE's to see what one session cannot (under raised parts); repeat for more. SOURCE sets the placement."""
-    logs: tyro.conf.UseAppendAction[tuple[Path, ...]] = ()
-    """MCAP recording of an interaction (or a MIT pushing-dataset .h5/.json trial); repeat for several trials."""
     holdout: Path | None = None
     """Recording kept out of the fit, used to measure predictive error."""
     output: Annotated[Path, tyro.conf.arg(aliases=("-o",))] = Path("out")
-    """Output directory; replaced only when the build succeeds."""
+    """Output folder. twin's own files in it are replaced once the new build is complete; a folder holding
+    files twin did not write is refused unless --force (they are never removed)."""
+    force: bool = False
+    """Write into an existing folder that holds files twin did not write; they are kept as they are."""
     material: str | None = None
-    """Material name from the library (default: the scan's object.json hint, else unknown)."""
+    """What the object is made of, in words ("beech wood", "painted MDF", "aluminium"; matched to the library
+    in assets/materials.json). Default: the scan's object.json hint, else unknown."""
+    mass: tuple[float, ...] = ()
+    """KG [STD]: the object's weighed mass and, optionally, its standard uncertainty [kg] (default half of
+    1 g or 1 %, whichever is larger: a kitchen scale). Used as a measurement in the fit."""
+    mesh_units: Literal["m", "cm", "mm", "in"] | None = None
+    """Length unit of a mesh SOURCE (default metres); e.g. mm for a CAD export."""
     name: str | None = None
     """Asset name (default: from object.json or the mesh file name)."""
     method: Literal["newton", "ls"] = "newton"
@@ -93,8 +106,10 @@ class Diagnose:
 class Synth:
     """Make a sample with known truth: an RGB-D scan and two recordings of a held object or a jointed part."""
 
-    output: Annotated[Path, tyro.conf.arg(aliases=("-o",))] = Path("samples/cube")
-    """Directory to write (scan/, trial.mcap, heldout.mcap, truth.json)."""
+    output: Annotated[Path, tyro.conf.arg(aliases=("-o",))]
+    """Folder to write (scan/, trial.mcap, heldout.mcap, truth.json); an existing one needs --force."""
+    force: bool = False
+    """Replace what an earlier `twin synth` wrote into OUTPUT (files it did not write are kept)."""
     object: Literal["drawer", "cabinet_door", "oven_door"] | None = None
     """A part on a joint (RigPI's drawer, cabinet door, oven door analogues) instead of a held --shape."""
     shape: Literal["cube", "sphere"] = "cube"
@@ -126,10 +141,12 @@ class Bench:
     push-real: the MIT block pushes: friction per trial and its spread, quasi-static estimate, predictive validity.
     push-mit: the MIT pushing dataset's trials (mass known): friction per trial, spread, predictive validity.
     diagnose: --concealed recordings with a hidden effect of random size and --clean ones, shuffled: effect found?
+    fuzz: seconds until a wrong SOURCE, OUT, material or topic is reported; then every reader fed --inputs
+      seeded mutations of a valid file: outcomes counted, uncaught ones listed.
     """
 
     what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct",
-                                       "push", "push-real", "push-mit", "diagnose"]]
+                                       "push", "push-real", "push-mit", "diagnose", "fuzz"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -172,6 +189,10 @@ class Bench:
     push_real: bool = False
     """Diagnose the MIT block pushes of ../shared/data (odd trials fitted, even held out; --blocks picks)
     instead of synthetic recordings (diagnose)."""
+    inputs: int = 2000
+    """fuzz: mutated inputs per reader."""
+    readers: tuple[str, ...] = ()
+    """fuzz: readers to run (default all; names as in its table)."""
     push_synth: bool = False
     """Diagnose synthetic pushes with a concealed drag, a concealed delay or nothing, --seeds of each (diagnose)."""
 
@@ -180,21 +201,32 @@ def _log(message: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {message}", flush=True)
 
 
+def _weighed(values: tuple[float, ...]) -> tuple[float, float] | None:
+    """--mass KG [STD] as (kg, standard uncertainty); without STD a kitchen scale's: +-max(1 g, 1 %) at 2 sigma."""
+    if not values:
+        return None
+    if len(values) > 2:
+        raise ValueError(f"--mass {' '.join(map(str, values))}: expected KG or KG STD")
+    return (values[0], values[1] if len(values) == 2 else max(0.001, 0.01 * abs(values[0])) / 2)
+
+
 def _run_build(args: Build) -> None:
     from twin.build import BuildConfig, build
+    from twin.checks import check_build
 
-    build(
-        BuildConfig(
-            source=args.source, scans=args.scan, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
-            name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
-            optimizer=args.optimizer,
-            vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind, base_mesh=args.base_mesh,
-            topics=_role_map(args.topic, "--topic"), frames=_role_map(args.frame, "--frame"),
-            wrench_rotation_xyzw=args.wrench_rotation, wrench_reaction=args.wrench_reaction,
-            push_min_speed_m_s=args.push_min_speed, diagnose=args.diagnose,
-        ),
-        log=_log,
+    config = BuildConfig(
+        source=args.source, scans=args.scan, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
+        name=args.name, method=args.method, window_s=args.window_s, max_iterations=args.max_iterations,
+        optimizer=args.optimizer,
+        vlm=args.vlm, vlm_model=args.vlm_model, kind=args.kind, base_mesh=args.base_mesh,
+        topics=_role_map(args.topic, "--topic"), frames=_role_map(args.frame, "--frame"),
+        wrench_rotation_xyzw=args.wrench_rotation, wrench_reaction=args.wrench_reaction,
+        push_min_speed_m_s=args.push_min_speed, diagnose=args.diagnose, force=args.force,
+        mesh_units=args.mesh_units, mass_kg=_weighed(args.mass),
     )
+    check_build(config)
+    _quiet_warp()
+    build(config, log=_log)
 
 
 def _role_map(items: tuple[str, ...], flag: str) -> tuple[tuple[str, str], ...]:
@@ -224,6 +256,10 @@ def _run_inspect(args: Inspect) -> None:
 def _run_synth(args: Synth) -> None:
     import trimesh
 
+    from twin.output import check_output, staged_output
+
+    check_output(args.output, args.force, replace_own=False, made_by="synth")
+
     if args.object is not None:
         from pipelines.synth.held import SensorNoise
         from pipelines.synth.jointed import jointed_paper_objects
@@ -238,7 +274,8 @@ def _run_synth(args: Synth) -> None:
                                             jointed_paper_objects()[args.object], SensorNoise())
             _log(f"concealing {effect.name} {effect.params}")
         _log(f"synthesising {args.object} into {args.output}")
-        make_jointed_sample(args.output, JointedSampleConfig(object=args.object, seed=args.seed, effect=effect))
+        with staged_output(args.output, args.force, replace_own=False, made_by="synth") as tmp:
+            make_jointed_sample(tmp, JointedSampleConfig(object=args.object, seed=args.seed, effect=effect))
         _log(f"wrote {args.output}")
         return
 
@@ -260,97 +297,170 @@ def _run_synth(args: Synth) -> None:
     config = HeldSampleConfig(name=args.shape, material=args.material, mass_kg=args.mass_kg, seed=args.seed,
                               effect=effect)
     _log(f"synthesising {args.shape} into {args.output}")
-    make_held_sample(mesh, args.output, config)
+    with staged_output(args.output, args.force, replace_own=False, made_by="synth") as tmp:
+        make_held_sample(mesh, tmp, config)
     _log(f"wrote {args.output}")
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("twin")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+_INTERRUPTED = threading.Event()
+
+
+def _interrupt(signum, frame) -> None:
+    # SIGTERM unwinds like Ctrl-C, so every temporary folder is removed on the way out; the flag is for an
+    # interrupt that lands in a C extension's import, which Python turns into an ImportError
+    _INTERRUPTED.set()
+    raise KeyboardInterrupt
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"twin: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; stage errors become one line on stderr and exit code 1."""
+    """Entry point: errors become one line `twin: error: ...` on stderr and exit code 1; an interrupt
+    (Ctrl-C, SIGTERM) one line and exit code 130."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] in (["--version"], ["-V"]):
+        print(f"twin {_version()}")
+        return 0
+    command = tyro.extras.subcommand_cli_from_dict(
+        {"build": Build, "diagnose": Diagnose, "inspect": Inspect, "synth": Synth, "bench": Bench}, args=argv)
+    warnings.showwarning = _show_warning  # one line each, like the errors, not the file and line of the check
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    _INTERRUPTED.clear()
+    previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)} if in_main_thread else {}
+    try:
+        _dispatch(command)
+    except BaseException as exc:  # noqa: BLE001 - every way out is one line
+        if _INTERRUPTED.is_set() or isinstance(exc, KeyboardInterrupt):
+            print("twin: interrupted; outputs left as they were", file=sys.stderr)
+            return 130
+        if isinstance(exc, SystemExit) or os.environ.get("TWIN_DEBUG"):
+            raise
+        if isinstance(exc, (ValueError, RuntimeError, OSError)):
+            print(f"twin: error: {_one_line(exc)}", file=sys.stderr)
+        else:  # a user gets one line, a developer the traceback on request
+            print(f"twin: error: internal error ({type(exc).__name__}: {_one_line(exc)}); "
+                  f"TWIN_DEBUG=1 shows where", file=sys.stderr)
+        return 1
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return 0
+
+
+def _quiet_warp() -> None:
     import warp as wp
 
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # no per-module load lines in the progress log
-    command = tyro.extras.subcommand_cli_from_dict(
-        {"build": Build, "diagnose": Diagnose, "inspect": Inspect, "synth": Synth, "bench": Bench}, args=argv)
+    # Warp's native init prints a CUDA-driver notice straight to fd 2 on machines without a GPU: errors are
+    # one line each, so the notice is kept out (a GPU machine loses nothing, a failed init still raises)
+    saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
     try:
-        if isinstance(command, Build):
-            _run_build(command)
-        elif isinstance(command, Inspect):
-            _run_inspect(command)
-        elif isinstance(command, Diagnose):
-            from twin.build import DiagnoseRunConfig, diagnose_output
+        sys.stderr.flush()
+        os.dup2(devnull, 2)
+        wp.init()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
 
-            diagnose_output(DiagnoseRunConfig(command.output, command.logs, command.holdout, command.bootstraps),
-                            log=_log)
-        elif isinstance(command, Synth):
-            _run_synth(command)
-        else:
-            if command.what == "sample":
-                from twin.bench.sample import bench_sample
 
-                bench_sample(command.sample, command.methods)
-            elif command.what == "diagnose":
-                from twin.bench.diagnose import (
-                    bench_diagnose, bench_diagnose_push_real, bench_diagnose_push_synth, bench_diagnose_workshop,
-                )
+def _dispatch(command) -> None:
+    if not isinstance(command, (Build, Inspect)):  # a build checks its inputs first and loads warp after
+        _quiet_warp()
+    if isinstance(command, Build):
+        _run_build(command)
+    elif isinstance(command, Inspect):
+        _run_inspect(command)
+    elif isinstance(command, Diagnose):
+        from twin.build import DiagnoseRunConfig, diagnose_output
 
-                if command.workshop:
-                    bench_diagnose_workshop()
-                elif command.push_real:
-                    bench_diagnose_push_real(command.blocks)
-                elif command.push_synth:
-                    bench_diagnose_push_synth(command.seeds)
-                else:
-                    bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases)
-            elif command.what == "crlb":
-                from twin.bench.crlb import bench_crlb
+        diagnose_output(DiagnoseRunConfig(command.output, command.logs, command.holdout, command.bootstraps),
+                        log=_log)
+    elif isinstance(command, Synth):
+        _run_synth(command)
+    else:
+        if command.what == "sample":
+            from twin.bench.sample import bench_sample
 
-                bench_crlb(command.draws)
-            elif command.what == "throughput":
-                from twin.bench.throughput import bench_throughput
+            bench_sample(command.sample, command.methods)
+        elif command.what == "diagnose":
+            from twin.bench.diagnose import (
+                bench_diagnose, bench_diagnose_push_real, bench_diagnose_push_synth, bench_diagnose_workshop,
+            )
 
-                bench_throughput(command.device, command.objects)
-            elif command.what == "mujoco":
-                from twin.bench.mujoco import bench_mujoco
-
-                bench_mujoco(command.seeds)
-            elif command.what == "reconstruct":
-                from twin.bench.reconstruct import bench_reconstruct
-
-                bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only, names=command.names,
-                                  noises=command.noise)
-            elif command.what == "push":
-                from twin.bench.push import bench_push
-
-                bench_push(command.seeds)
-            elif command.what == "push-real":
-                from twin.bench.push import bench_push_offsets, bench_push_real
-
-                if command.offsets_only:
-                    bench_push_offsets()
-                else:
-                    bench_push_real(blocks=command.blocks)
-            elif command.what == "push-mit":
-                from twin.bench.push_mit import bench_push_mit
-
-                bench_push_mit()
-            elif command.what == "priors":
-                from twin.bench.priors import bench_priors
-
-                bench_priors()
-            elif command.jointed_only:
-                from twin.bench.paper_jointed import bench_paper_jointed
-
-                bench_paper_jointed(command.seeds)
+            if command.workshop:
+                bench_diagnose_workshop()
+            elif command.push_real:
+                bench_diagnose_push_real(command.blocks)
+            elif command.push_synth:
+                bench_diagnose_push_synth(command.seeds)
             else:
-                from twin.bench.paper import bench_paper
+                bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases)
+        elif command.what == "fuzz":
+            from twin.bench.fuzz import bench_fuzz
 
-                bench_paper(command.seeds, paper_optimizer=command.paper_optimizer,
-                            from_vlm_starts=command.vlm_starts)
-    except (ValueError, RuntimeError, OSError) as exc:
-        print(f"twin: error: {exc}", file=sys.stderr)
-        return 1
-    return 0
+            bench_fuzz(command.inputs, command.readers, sample=command.sample)
+        elif command.what == "crlb":
+            from twin.bench.crlb import bench_crlb
+
+            bench_crlb(command.draws)
+        elif command.what == "throughput":
+            from twin.bench.throughput import bench_throughput
+
+            bench_throughput(command.device, command.objects)
+        elif command.what == "mujoco":
+            from twin.bench.mujoco import bench_mujoco
+
+            bench_mujoco(command.seeds)
+        elif command.what == "reconstruct":
+            from twin.bench.reconstruct import bench_reconstruct
+
+            bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only, names=command.names,
+                              noises=command.noise)
+        elif command.what == "push":
+            from twin.bench.push import bench_push
+
+            bench_push(command.seeds)
+        elif command.what == "push-real":
+            from twin.bench.push import bench_push_offsets, bench_push_real
+
+            if command.offsets_only:
+                bench_push_offsets()
+            else:
+                bench_push_real(blocks=command.blocks)
+        elif command.what == "push-mit":
+            from twin.bench.push_mit import bench_push_mit
+
+            bench_push_mit()
+        elif command.what == "priors":
+            from twin.bench.priors import bench_priors
+
+            bench_priors()
+        elif command.jointed_only:
+            from twin.bench.paper_jointed import bench_paper_jointed
+
+            bench_paper_jointed(command.seeds)
+        else:
+            from twin.bench.paper import bench_paper
+
+            bench_paper(command.seeds, paper_optimizer=command.paper_optimizer,
+                        from_vlm_starts=command.vlm_starts)
 
 
 if __name__ == "__main__":

@@ -59,24 +59,26 @@ def jointed_theta(identified, prior, joint_type: str):
     return Theta(mass, _prior_estimate(inertial.com, lo[1:4], hi[1:4]), inertia, friction, tuple(determined))
 
 
-def build_jointed(config, trials, holdout, detection, mesh_object, placement, parts, prior, name, scan_stats,
-                  timer, log, t_start) -> Path:
+def build_jointed(config, trials, holdout, detection, mesh_object, placement, parts, prior, choice, name,
+                  scan_stats, timer, log, t_start) -> Path:
     """Identify the part on its joint, look for missing passive joint forces, export base + part + joint,
     validate, replay the held-out trial in MuJoCo."""
-    import trimesh
-
-    from assets import Asset, Fit, FitMetrics, Geometry, Joint, Material, asset_to_json, write_asset
+    from assets import Asset, Fit, FitMetrics, Geometry, Joint, asset_to_json, write_asset
     from exporters import export_all
     from pipelines.identify.jointed import JointedConfig, identify_jointed
     from pipelines.identify.kind import joint_coordinates
+    from pipelines.meshes import read_mesh
     from pipelines.validate import replay_jointed_mujoco, validate_jointed_exports
 
-    from .build import _log_diagnosis, _write_meshes, staged_output
+    from .build import _log_diagnosis, _write_meshes, kind_hint, log_summary, weighed_where_prior
+    from .summary import bounds_flags
+    from .output import staged_output
 
     fit = detection.joint
     jconfig = JointedConfig()
-    identified = timer.run("identify (Featherstone)", identify_jointed, trials, fit, placement, prior.inertial,
-                           holdout, jconfig)
+    with kind_hint(detection, trials[0]):
+        identified = timer.run("identify (Featherstone)", identify_jointed, trials, fit, placement, prior.inertial,
+                               holdout, jconfig)
     diagnosis, kept, diagnosis_skipped = None, identified, None
     if config.diagnose:
         from pipelines.diagnose import DiagnoseConfig, diagnose_jointed
@@ -99,29 +101,28 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     joint = Joint(fit.type, tuple(fit.axis), tuple(fit.origin), lower, upper,
                   damping=found.get("viscous_damping", {"b": 0.0})["b"], stiffness=spring["k"], spring_ref=spring["q0"],
                   axis_std_rad=fit.axis_std_rad, origin_std_m=tuple(fit.origin_std_m))
-    theta = jointed_theta(kept, prior, fit.type)
+    theta = weighed_where_prior(jointed_theta(kept, prior, fit.type), config.mass_kg)
     held = identified.fits.get("holdout", {})
     metrics = lambda d: FitMetrics(d["rmse_position_m"], d["rmse_q"] if fit.type == "revolute" else 0.0,  # noqa: E731
                                    d["rmse_q"])
     out = Path(config.output)
-    with staged_output(out) as tmp:
+    with staged_output(out, config.force) as tmp:
         collision = _write_meshes(tmp, mesh_object, parts)
         base = None
         if config.base_mesh:
-            try:
-                trimesh.load(config.base_mesh, force="mesh").export(tmp / "meshes" / "base.obj")
-            except Exception as exc:  # trimesh raises many types for bad files
-                raise ValueError(f"{config.base_mesh}: cannot read base mesh ({exc})") from exc
+            read_mesh(config.base_mesh, config.mesh_units or "m", solid=False).export(tmp / "meshes" / "base.obj")
             base = "meshes/base.obj"
         asset = Asset(
             name=name, kind=fit.type, placement=placement, theta=theta,
             geometry=Geometry("meshes/visual.obj", collision, base),
-            material=Material(prior.material.name, float(theta.mass.value / mesh_object.volume), prior.friction[0]),
+            material=choice.material(prior.material.name, float(theta.mass.value / mesh_object.volume),
+                                     prior.friction[0]),
             joint=joint,
             fit=Fit(metrics(held["prior"]), diagnosis.fits["after"] if kept is not identified else
                     metrics(held[identified.selected]), jconfig.window_s) if held else None,
             effects=diagnosis.effects if diagnosis else (),
             unexplained=diagnosis.unexplained if diagnosis else (),
+            flags=bounds_flags(theta, prior.lower, prior.upper),
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), **({"report": "report.html"} if identified.traces else {})}
@@ -160,5 +161,6 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
                 "baseline_position": fit.tracked_position(tr["prior"]).reshape(-1, 3),
                 "final_position": fit.tracked_position(tr["kept"]).reshape(-1, 3),
             }, diagnosis.traces if diagnosis else None)
+    log_summary(asset_to_json(asset), log)
     log(f"wrote {out}/ ({fit.type} joint) in {time.perf_counter() - t_start:.1f} s")
     return out

@@ -150,6 +150,15 @@ def _fmt(x) -> str:
     return f"{x:.5g}" if isinstance(x, float) else html.escape(str(x))
 
 
+def summary_section(asset: dict) -> str:
+    from twin.summary import summary_lines
+
+    flagged = ' style="color:#b00"'
+    items = "".join(f"<li{flagged if line.startswith('FLAG') else ''}>{html.escape(line)}</li>"
+                    for line in summary_lines(asset))
+    return f"<h2>Summary</h2><ul>{items}</ul>" if items else ""
+
+
 def write_report(path: Path, asset: dict, loss_history, traces: dict | None,
                  diagnosis_traces: dict | None = None) -> None:
     """Write a self-contained HTML report (plots embedded as PNG); `traces` None (a diagnosis alone) leaves
@@ -196,6 +205,7 @@ def write_report(path: Path, asset: dict, loss_history, traces: dict | None,
 <style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}table{{border-collapse:collapse}}
 td,th{{border:1px solid #ccc;padding:3px 8px;font-size:90%}}</style></head><body>
 <h1>{html.escape(asset['name'])} ({asset['kind']})</h1>
+{summary_section(asset)}
 <h2>Identified parameters (object frame, SI)</h2>
 <table><tr><th>parameter</th><th>value</th><th>std</th><th>source</th></tr>{rows}</table>
 {session_table}

@@ -127,6 +127,24 @@ def identify_held(
     )
 
 
+def with_weighed_mass(body: Inertial, covariance: np.ndarray, mass_kg: float,
+                      std_kg: float) -> tuple[Inertial, np.ndarray]:
+    """An estimate and its covariance conditioned on a weighing, a Gaussian measurement of the mass.
+
+    The flat parameters (mass, COM xyz, Ixx Iyy Izz Ixy Ixz Iyz) take the linear (Kalman) update
+    through their covariance, so COM and inertia move as far as the recordings tie them to the mass.
+    Where the update would leave the inertia unphysical, the nearest physical one is kept.
+    """
+    inertia = np.asarray(body.inertia, dtype=float)
+    x = np.array([body.mass, *body.com, *np.diag(inertia), inertia[0, 1], inertia[0, 2], inertia[1, 2]])
+    cov = np.asarray(covariance, dtype=float)
+    gain = cov[:, 0] / (cov[0, 0] + std_kg**2)
+    x = x + gain * (mass_kg - x[0])
+    cov = cov - np.outer(gain, cov[0, :])
+    moments = np.array([[x[4], x[7], x[8]], [x[7], x[5], x[9]], [x[8], x[9], x[6]]])
+    return Inertial(float(x[0]), tuple(x[1:4]), nearest_physical_inertia(float(x[0]), moments)), cov
+
+
 def windows_from_recordings(recordings, config: IdentifyConfig) -> ShootingWindows:
     """Back-to-back shooting windows of every recording, batched, smoothed as `config` says."""
     return concat_windows(

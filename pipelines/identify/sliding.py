@@ -373,7 +373,8 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: Force
     if not starts:
         raise ValueError(
             f"{recording.path}: no {config.window_s} s window in which the pusher touches the object"
-            + (" and it slides" if moving_only else "")
+            + (f" and it slides faster than {config.moving_speed_m_s} m/s (a slow push needs a lower "
+               f"--push-min-speed, e.g. 0.001)" if moving_only else "")
         )
     starts = np.asarray(starts)
     w = recording.wrench

@@ -31,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import norm
 
 from assets import Inertial
 from assets.materials import MaterialRange, find_material, material_range
@@ -76,8 +77,13 @@ class _Fill:
 
 
 def estimate_prior(mesh_object, material: MaterialRange | str | None = None, guess: VlmGuess | None = None,
-                   config: PriorConfig = PriorConfig()) -> Prior:
+                   config: PriorConfig = PriorConfig(), weighed: tuple[float, float] | None = None) -> Prior:
     """theta0 and C for a watertight mesh (object frame, metres) of `material`, fused with `guess` if given.
+
+    weighed: (mass, standard uncertainty) [kg] from a scale. A scale beats any geometry x material
+    guess, so the mass and its bounds become the weighing's; the fills and densities consistent with it
+    still shape the COM and inertia. A weighed mass the material cannot explain for this volume is kept
+    all the same (the library's range or the mesh may be wrong) and said in `details`.
 
     material: a library entry or name; None takes the VLM's material when the
     library knows it, else the wide `unknown` range. ValueError for an open mesh
@@ -123,10 +129,21 @@ def estimate_prior(mesh_object, material: MaterialRange | str | None = None, gue
                           "tail_dof": None if np.isinf(nu) else float(nu)}
         vlm_record = {"answer": guess.to_json(), **(vlm_record or {"used": False})}
 
+    weighed_record = None
+    if weighed is not None:
+        mass_w, std_w = weighed
+        likely = post_w * np.exp(-0.5 * ((np.exp(log_mass) - mass_w) / std_w) ** 2)
+        consistent = likely.sum() > 1e-12 * post_w.sum()
+        post_w = likely if consistent else post_w
+        weighed_record = {"mass_kg": mass_w, "std_kg": std_w, "consistent_with_material": bool(consistent)}
+
     lo_p, hi_p = (1 - config.credible) / 2, (1 + config.credible) / 2
     mass_samples = np.exp(log_mass).ravel()
     geometry_mass = _weighted_quantiles(mass_samples, prior_w.ravel(), (0.5, lo_p, hi_p))
     mass0, mass_lo, mass_hi = _weighted_quantiles(mass_samples, post_w.ravel(), (0.5, lo_p, hi_p))
+    if weighed is not None:
+        z = float(norm.ppf(hi_p))
+        mass0, mass_lo, mass_hi = weighed[0], max(weighed[0] - z * weighed[1], 1e-9), weighed[0] + z * weighed[1]
     fill_w = post_w.sum(axis=1) / post_w.sum()
     com0 = sum(fw * b.body.com for fw, b in zip(fill_w, bodies))
     per_mass = sum(fw * b.body.unit_inertia() / b.body.volume for fw, b in zip(fill_w, bodies))
@@ -134,8 +151,13 @@ def estimate_prior(mesh_object, material: MaterialRange | str | None = None, gue
     rho_grid = np.exp(u)
     inertia_lo, inertia_hi = [], []
     for k in range(3):
-        values = (J[:, k][:, None] * rho_grid[None, :]).ravel()
-        a, b = _weighted_quantiles(values, post_w.ravel(), (lo_p, hi_p))
+        if weighed_record is not None and not weighed_record["consistent_with_material"]:
+            # the scale, not the material's density, sets the mass: each fill's moment per kilogram times its bounds
+            per_kg = J[:, k] / V
+            a, b = per_kg.min() * mass_lo, per_kg.max() * mass_hi
+        else:
+            values = (J[:, k][:, None] * rho_grid[None, :]).ravel()
+            a, b = _weighted_quantiles(values, post_w.ravel(), (lo_p, hi_p))
         inertia_lo.append(a * (1 - config.inertia_margin))
         inertia_hi.append(b * (1 + config.inertia_margin))
     box_lo, box_hi = np.asarray(mesh_object.bounds, dtype=float)
@@ -159,6 +181,7 @@ def estimate_prior(mesh_object, material: MaterialRange | str | None = None, gue
         "inner_offset": inner_method if thicknesses else None,
         "geometry": {"mass_kg": geometry_mass[0], "mass_interval_kg": list(geometry_mass[1:])},
         "vlm": vlm_record,
+        "weighed": weighed_record,
         "fused": {"mass_kg": mass0, "mass_interval_kg": [mass_lo, mass_hi]},
     }}
     return Prior(inertial, tuple(map(float, lower)), tuple(map(float, upper)), material, volume, uniform,

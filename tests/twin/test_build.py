@@ -66,8 +66,10 @@ def _assert_clean_failure(proc, path_fragment: str, out: Path, marker: str):
 
 @pytest.fixture
 def existing_out(tmp_path):
+    """An earlier build's output, with a file the user added since."""
     out = tmp_path / "out"
     out.mkdir()
+    (out / "asset.json").write_text(json.dumps({"schema": "twin.asset/1", "files": {}}))
     (out / "marker.txt").write_text("previous build")
     return out
 

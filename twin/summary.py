@@ -1,0 +1,76 @@
+"""What a build says in words at its end and in its report: which estimate was kept and why, what was
+measured and what is prior, and the flags a user must see beside the numbers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+_ESTIMATES = {"newton": "the Newton fit", "least_squares": "least squares", "baseline": "the prior",
+              "prior": "the prior"}
+
+
+def bounds_flags(theta, lower, upper) -> tuple[dict, ...]:
+    """A measured mass or principal moment outside the geometry prior's bounds C.
+
+    The bounds hold 99 % of what the mesh and material allow, so a value outside them is either a
+    surprising object (a hidden dense insert, a hollow part) or a fit that absorbed something else (a
+    misdetected kind, a wrench bias): either way it must not pass as an ordinary measurement.
+    """
+    flags = []
+    if theta.mass.source == "measured" and not lower[0] <= theta.mass.value <= upper[0]:
+        flags.append({"parameter": "mass", "problem": "outside the geometry prior's bounds",
+                      "value": float(theta.mass.value), "bounds": [float(lower[0]), float(upper[0])]})
+    if theta.inertia.source == "measured" and len(lower) >= 7:
+        moments = np.diag(np.asarray(theta.inertia.value, dtype=float))
+        outside = [i for i in range(3) if not lower[4 + i] <= moments[i] <= upper[4 + i]]
+        if outside:
+            flags.append({"parameter": "inertia", "problem": "diagonal moments outside the geometry prior's bounds",
+                          "axes": ["xyz"[i] for i in outside], "value": moments.tolist(),
+                          "bounds": [list(map(float, lower[4:7])), list(map(float, upper[4:7]))]})
+    return tuple(flags)
+
+
+def flag_line(flag: dict) -> str:
+    value = flag.get("value")
+    bounds = flag.get("bounds")
+    if flag.get("parameter") == "mass" and bounds:
+        return f"mass {value:.4g} kg is {flag['problem']} [{bounds[0]:.4g}, {bounds[1]:.4g}] kg"
+    return f"{flag.get('parameter', '?')}: {flag.get('problem', '')}"
+
+
+def summary_lines(doc: dict) -> list[str]:
+    """The build's closing words from its asset.json document."""
+    theta, provenance = doc.get("theta", {}), doc.get("provenance", {})
+    identify = provenance.get("identify", {})
+    lines = []
+    selected = identify.get("selected")
+    if selected:
+        fits = identify.get("heldout_fits") or identify.get("fits", {}).get("holdout") or {}
+        rmse = {k: v.get("rmse_position_m") for k, v in fits.items() if isinstance(v, dict)}
+        if selected in rmse and len(rmse) > 1:
+            others = ", ".join(f"{_ESTIMATES.get(k, k)} {1000 * v:.3f} mm" for k, v in rmse.items()
+                               if k != selected and v is not None)
+            why = (f"it predicts the held-out recording best ({1000 * rmse[selected]:.3f} mm position RMSE; "
+                   f"{others})")
+        else:
+            why = "the default method; a held-out recording (--holdout) would let the estimates compete"
+        lines.append(f"kept {_ESTIMATES.get(selected, selected)}: {why}")
+    if identify.get("friction_from"):
+        lines.append(f"friction from {identify['friction_from']}")
+    effects = [e["name"] for e in doc.get("effects", [])]
+    if effects:
+        lines.append(f"the diagnosis found {', '.join(effects)}; the parameters refitted with it are kept")
+    by_source: dict[str, list[str]] = {}
+    for key, estimate in theta.items():
+        by_source.setdefault(estimate.get("source", "measured"), []).append(key)
+    for source in ("measured", "weighed", "prior"):
+        if by_source.get(source):
+            lines.append(f"{source}: {', '.join(by_source[source])}")
+    material = doc.get("material", {})
+    if material.get("source") == "unmatched":
+        lines.append(f"material {material.get('text')!r} matched nothing in the library: the wide prior was used")
+    elif material.get("text") and material.get("text") != material.get("name"):
+        lines.append(f"material {material['text']!r} read as {material.get('name')} "
+                     f"(match {material.get('match_score', 1):.2f})")
+    lines += [f"FLAG: {flag_line(f)}" for f in doc.get("flags", [])]
+    return lines
