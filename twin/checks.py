@@ -122,6 +122,8 @@ def check_build(config) -> Path:
         check_recording_path(config.holdout, "--holdout")
     if config.base_mesh is not None:
         base = Path(config.base_mesh)
+        if not base.exists():
+            raise InputError(f"{base}: base mesh not found (--base-mesh)")
         if not base.is_file() or base.suffix.lower() not in MESH_SUFFIXES:
             raise InputError(f"{base}: --base-mesh needs a mesh file ({', '.join(MESH_SUFFIXES)})")
     for path in (*config.logs, *((config.holdout,) if config.holdout else ())):

@@ -115,8 +115,9 @@ class JointedIdentification:
         return float(self.values[self.names.index(name)])
 
     def std(self, name: str) -> float:
-        i = self.names.index(name)
-        return float(np.sqrt(max(self.covariance[i, i], 0.0)))
+        """Standard error; inf where the curvature left it undetermined (a NaN would make asset.json unreadable)."""
+        variance = float(self.covariance[self.names.index(name)][self.names.index(name)])
+        return float(np.sqrt(max(variance, 0.0))) if np.isfinite(variance) else float("inf")
 
     def provenance(self) -> dict:
         return {

@@ -24,6 +24,7 @@ def test_session_of_another_object_fails_cleanly(tmp_path):
                                                                      view_count=12), np.random.default_rng(3), "bar")
     out = tmp_path / "out"
     out.mkdir()
+    (out / "asset.json").write_text('{"schema": "twin.asset/1", "files": {}}')  # an earlier build's output
     (out / "marker.txt").write_text("previous build")
     proc = subprocess.run([sys.executable, "-m", "twin.cli", "build", str(SAMPLE / "scan"), "--scan", str(other),
                            "--logs", str(SAMPLE / "trial.mcap"), "-o", str(out)],
@@ -32,4 +33,4 @@ def test_session_of_another_object_fails_cleanly(tmp_path):
     lines = [line for line in proc.stderr.strip().splitlines() if line.startswith("twin: error:")]
     assert len(lines) == 1 and "bar_session" in lines[0] and "cannot register" in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr
-    assert (out / "marker.txt").read_text() == "previous build" and len(list(out.iterdir())) == 1
+    assert (out / "marker.txt").read_text() == "previous build" and len(list(out.iterdir())) == 2

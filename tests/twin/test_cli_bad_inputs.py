@@ -129,7 +129,7 @@ ROWS = [
     ("logs a csv", _with_logs("table.csv"), "table.csv: not a recording"),
     ("logs a folder without mcap", _with_logs("empty_dir"), "empty_dir: a folder given to --logs"),
     ("holdout missing", lambda d: _good(d, "--holdout", str(d / "gone.mcap")), "gone.mcap: recording not found"),
-    ("base mesh missing", lambda d: _good(d, "--base-mesh", str(d / "base.obj")), "base.obj: --base-mesh needs"),
+    ("base mesh missing", lambda d: _good(d, "--base-mesh", str(d / "base.obj")), "base.obj: base mesh not found"),
     ("material unknown", lambda d: _good(d, "--material", "unobtainium"), "--material: unknown material"),
     ("material with no library entry", lambda d: _good(d, "--material", "carbon fibre"), "--material:"),
     ("topic absent", lambda d: _good(d, "--topic", "pose=/vicon/x"), "trial.mcap: no topic /vicon/x"),
