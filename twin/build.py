@@ -345,7 +345,8 @@ def choose_material(named: str | None, hint: str | None, log) -> MaterialChoice:
         log(f"warning: object.json material {hint!r} matches nothing in the library (nearest: "
             f"{', '.join(suggest_materials(hint))}); using the wide prior of an unknown material")
         return MaterialChoice(None, hint, "unmatched", 0.0)
-    log(f"material {hint!r} read as {match.name} ({match.how}, match {match.score:.2f})")
+    if match.how != "exact":
+        log(f"material {hint!r} read as {match.name} ({match.how}, match {match.score:.2f})")
     return MaterialChoice(material_range(match.name), hint, "hint", match.score)
 
 
