@@ -272,6 +272,10 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), "report": "report.html"}
         validation = timer.run("validate", validate_exports, asset, tmp, files)
+        replay = {}
+        if detection.kind == "free":
+            replay = _replay_free(timer, tmp / files["mjcf"], asset, holdout or trials[0], X_tracked_body,
+                                  fit.window_s, diagnosis, log)
         provenance = {
             "config": json.loads(json.dumps(asdict(config), default=str)),
             "scan": scan_stats,
@@ -280,6 +284,7 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
             "kind": detection.to_json(),
             **identify_provenance,
             "validation": validation.to_json(),
+            **({"heldout_replay": replay} if replay else {}),
             "timings_s": timer.seconds | {"total": time.perf_counter() - t_start},
         }
         asset = Asset(**{**asset.__dict__, "files": files, "provenance": provenance})
@@ -310,6 +315,22 @@ def log_summary(doc: dict, log) -> None:
     log("summary:")
     for line in summary_lines(doc):
         log(f"  {line}")
+
+
+def _replay_free(timer, mjcf_path, asset, recording, X_tracked_body, window_s, diagnosis, log) -> dict:
+    """The exported MJCF replaying the evaluation recording in MuJoCo beside Newton's replay of the fit, and
+    both against the sensors' noise alone: the best any model could do on this recording."""
+    from pipelines.replay import replay_held_mujoco
+
+    mujoco = timer.run("replay (MuJoCo)", replay_held_mujoco, mjcf_path, asset, recording, X_tracked_body, window_s)
+    newton = asset.fit.final.rmse_position_m
+    floor = diagnosis.noise_floor.get("rmse_position_m") if diagnosis and diagnosis.noise_floor else None
+    log(f"replay of {Path(recording.path).name}: MuJoCo "
+        f"{1000 * mujoco['rmse_position_m']:.3f} mm, Newton {1000 * newton:.3f} mm"
+        + (f", the sensors' noise alone {1000 * floor:.3f} mm" if floor else ""))
+    return {"recording": str(recording.path), "mujoco": mujoco, "newton": {"rmse_position_m": newton},
+            "mujoco_over_newton": mujoco["rmse_position_m"] / newton if newton > 0 else None,
+            "noise_floor_m": floor, "mujoco_over_noise_floor": mujoco["rmse_position_m"] / floor if floor else None}
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,13 @@ def test_build_writes_every_file(built):
     assert "<img" in (built / "report.html").read_text()
 
 
+def test_the_exported_mjcf_replays_the_heldout_recording_in_mujoco_as_newton_does(built):
+    """MuJoCo, from the written MJCF, predicts the held-out recording within 1.5x Newton's error of the fit."""
+    replay = json.loads((built / "asset.json").read_text())["provenance"]["heldout_replay"]
+    assert replay["recording"].endswith("heldout.mcap") and replay["mujoco"]["windows"] > 50
+    assert replay["mujoco_over_newton"] < 1.5 and replay["mujoco_over_noise_floor"] < 2.0
+
+
 def test_build_recovers_the_sample_truth(built):
     """Mass within 2 %, principal moments within 5 %, COM within 2 mm, volume within 5 % of the truth."""
     asset = json.loads((built / "asset.json").read_text())
