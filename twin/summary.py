@@ -58,11 +58,12 @@ def summary_lines(doc: dict) -> list[str]:
     if identify.get("friction_from"):
         lines.append(f"friction from {identify['friction_from']}")
     replay = provenance.get("heldout_replay", {})
-    if isinstance(replay.get("mujoco"), dict) and replay.get("mujoco_over_newton"):
-        floor = replay.get("mujoco_over_noise_floor")
-        lines.append(f"the exported MJCF replays it in MuJoCo at {1000 * replay['mujoco']['rmse_position_m']:.3f} mm "
-                     f"({replay['mujoco_over_newton']:.2f}x Newton's"
-                     + (f", {floor:.2f}x the sensors' noise alone)" if floor else ")"))
+    mujoco, newton = (replay.get(k, {}).get("rmse_position_m") for k in ("mujoco", "newton"))
+    if mujoco is not None and newton:
+        floor = replay.get("noise_floor_m")
+        lines.append(f"the exported MJCF replays the held-out recording in MuJoCo at {1000 * mujoco:.3f} mm "
+                     f"({mujoco / newton:.2f}x Newton's" + (f", {mujoco / floor:.2f}x the sensors' noise alone)"
+                                                           if floor else ")"))
     effects = [e["name"] for e in doc.get("effects", [])]
     if effects:
         lines.append(f"the diagnosis found {', '.join(effects)}; the parameters refitted with it are kept")
