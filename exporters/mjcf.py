@@ -7,6 +7,45 @@ joint, or for drawers and doors inside a fixed base body on `asset.joint`
 (q = 0 at the placement, passive damping, `frictionloss` for the joint's
 Coulomb friction, `range` for its limits). Numbers are written with `repr` (shortest exact round trip) because
 `MjSpec.to_xml` rounds to 6 significant digits.
+
+A pushed object (kind "sliding") also gets `scene.xml` beside it (`export_scene`):
+the object file included, a support plane under it and the solver options a
+push needs. The object's file never holds a plane (DESIGN.md), so it can be
+dropped into any other scene.
+
+Contact parameters, written explicitly on every colliding geom (and the plane),
+chosen so that MuJoCo's soft contact behaves as Coulomb friction at the
+identified mu:
+
+- `friction="mu 0.005 0.0001"`: only the sliding coefficient is identified;
+  torsional and rolling keep MuJoCo's defaults (inactive at condim 3).
+- `condim="3"`: normal plus isotropic sliding friction. The moment that resists
+  a pushed object's turning comes from sliding friction at its support contacts
+  (MuJoCo puts them at the corners of a flat convex face, which resists turning
+  more than a uniformly loaded face: pipelines/identify/sliding.py); condim 4's
+  torsional friction would add to it, with a coefficient nobody measured.
+- `solref="0.02 1"`, `solimp="0.9 0.95 0.001 0.5 2"`: MuJoCo's defaults, written
+  so a reader sees them and another scene's `<default>` cannot change them
+  silently. A time constant of 0.02 s is critically damped and needs a step of
+  at most 0.01 s (MuJoCo: timeconst >= 2 timestep); Newton's importer maps it to
+  its own default stiffness and damping (ke 2500, kd 100), so Newton is unchanged.
+- scene.xml's `<option cone="elliptic" impratio="10">`: MuJoCo's default
+  pyramidal cone with condim 3 bounds the friction force by a square's corners,
+  so a push at 45 degrees to the contact frame's axes slides at 0.71 mu m g (and
+  at 2 mu m g accelerates 30 % too fast); the elliptic cone is the exact circle.
+  Soft friction constraints creep under any tangential load: at impratio 1 a
+  block held at 0.9 mu m g creeps 0.3 mm in 0.5 s, at impratio 10 (MuJoCo's
+  advice for elliptic cones) 0.04 mm, with sliding acceleration within 0.5 % of
+  (F - mu m g) / m either way. These are scene options (MJCF has no per-body
+  cone), so the object's own file keeps MuJoCo's defaults there.
+
+Friction of a pair: MuJoCo takes the larger of the two geoms' coefficients,
+Newton's SemiImplicit solver and PhysX their mean. The identified mu is the
+pair's (this object on the surface it was pushed over), so the object's geoms
+and scene.xml's plane both carry it: every engine then uses mu. `priority` or
+`solmix` would make the object's value win only in MuJoCo, so neither is written;
+in another scene the floor's own coefficient takes part as that engine combines
+them (a MuJoCo floor at the default 1 would win: give it mu, or a `<pair>`).
 """
 
 from __future__ import annotations
@@ -22,14 +61,21 @@ from assets import Asset
 from .names import base_name, file_stem, joint_name, mjcf_name, xml_comment_text
 from .preconditions import exportable_inertial
 
-__all__ = ["export_mjcf"]
+__all__ = ["SCENE_FILE", "SCENE_OPTIONS", "export_mjcf", "export_scene", "support_height_m"]
 
-"""Kinds written as one body on a free joint (no support plane: DESIGN.md)."""
+SCENE_FILE = "scene.xml"
+"""The scene of a pushed object, beside its MJCF (asset.json → files → "scene")."""
 
 # MuJoCo's defaults for the torsional and rolling coefficients; only sliding
 # friction is identified.
 _TORSION_FRICTION = 0.005
 _ROLL_FRICTION = 0.0001
+
+CONTACT = {"condim": "3", "solref": "0.02 1", "solimp": "0.9 0.95 0.001 0.5 2"}
+"""Contact attributes of every colliding geom (module docstring)."""
+
+SCENE_OPTIONS = {"timestep": "0.002", "gravity": "0 0 -9.81", "cone": "elliptic", "impratio": "10"}
+"""scene.xml's `<option>`: step [s], gravity [m/s^2] and the friction cone (module docstring)."""
 
 
 def _num(values) -> str:
@@ -41,12 +87,16 @@ def _mesh_name(rel_path: str) -> str:
     return PurePosixPath(rel_path).stem
 
 
+def _friction(mu: float) -> dict[str, str]:
+    return {"friction": _num((mu, _TORSION_FRICTION, _ROLL_FRICTION)), **CONTACT}
+
+
 def export_mjcf(asset: Asset, out_dir: Path) -> Path:
     """Write `out_dir/NAME.xml` for a rigid object, free or on a joint.
 
     Inertial: mass [kg], COM [m] and the full tensor about the COM [kg m^2],
     object frame. Collision: one mesh geom per convex part with sliding
-    friction `asset.theta.friction.value`. Visual: a massless, non-colliding
+    friction `asset.theta.friction.value` and the contact attributes `CONTACT`. Visual: a massless, non-colliding
     mesh geom in group 2. Mesh paths in `asset.geometry` are relative to
     `out_dir`.
 
@@ -81,14 +131,13 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
 
     world = ET.SubElement(root, "worldbody")
     if asset.joint is None:
-        world.append(ET.Comment(" object frame at the scanned placement; no support plane for free objects "))
+        world.append(ET.Comment(" object frame at the scanned placement; no support plane here (DESIGN.md) "))
         parent = world
     else:
         world.append(ET.Comment(" fixed base in world; the part at its scanned placement (q = 0) on its joint "))
         parent = ET.SubElement(world, "body", name=base_name(body_name))
         if asset.geometry.base:
-            ET.SubElement(parent, "geom", name=names[-1], type="mesh", mesh=names[-1],
-                          friction=_num((mu, _TORSION_FRICTION, _ROLL_FRICTION)))
+            ET.SubElement(parent, "geom", name=names[-1], type="mesh", mesh=names[-1], **_friction(mu))
     body = ET.SubElement(parent, "body", name=body_name, pos=_num(asset.placement.position), quat=_num((w, x, y, z)))
     if asset.joint is None:
         ET.SubElement(body, "freejoint", name=f"{body_name}_free")
@@ -116,15 +165,53 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
         contype="0", conaffinity="0", density="0", group="2",
     )
     for name in names[1:1 + len(asset.geometry.collision)]:
-        ET.SubElement(
-            body, "geom", name=name, type="mesh", mesh=name, group="3",
-            friction=_num((mu, _TORSION_FRICTION, _ROLL_FRICTION)),
-        )
+        ET.SubElement(body, "geom", name=name, type="mesh", mesh=name, group="3", **_friction(mu))
 
     if asset.joint is not None and asset.geometry.base:
         # the joint guides the part through the base (a carcass around a drawer): they must not collide
         ET.SubElement(ET.SubElement(root, "contact"), "exclude", body1=base_name(body_name), body2=body_name)
     ET.indent(root, space="  ")
     out_dir.mkdir(parents=True, exist_ok=True)
+    path.write_text(ET.tostring(root, encoding="unicode") + "\n")
+    return path
+
+
+def support_height_m(asset: Asset, out_dir: Path) -> float:
+    """World height [m] of the lowest collision-mesh vertex with the object at `asset.placement`: the
+    surface it rests on. Mesh paths in `asset.geometry` are relative to `out_dir`."""
+    import trimesh
+
+    R, p = asset.placement.rotation_matrix(), np.asarray(asset.placement.position, dtype=float)
+    lowest = []
+    for rel in asset.geometry.collision:
+        vertices = np.asarray(trimesh.load(Path(out_dir) / rel, force="mesh", process=False).vertices, dtype=float)
+        lowest.append(float(np.min(vertices @ R[2] + p[2])))
+    return min(lowest)
+
+
+def export_scene(asset: Asset, out_dir: Path, mjcf_path: Path) -> Path:
+    """Write `out_dir/scene.xml` for a pushed object: `mjcf_path` (its file, beside it) included, a
+    support plane and the solver options of a push (module docstring).
+
+    The plane's top is at `support_height_m` (world z [m]), under the object's placement; it carries
+    the identified friction `asset.theta.friction.value` with the object's contact attributes, so MuJoCo
+    takes mu for the pair. Options: `SCENE_OPTIONS` (gravity -9.81 m/s^2 along world z, 2 ms step,
+    elliptic cone, impratio 10).
+    """
+    out_dir = Path(out_dir)
+    path = out_dir / SCENE_FILE
+    body_name = mjcf_name(asset.name)
+    mu = float(asset.theta.friction.value)
+    x, y, _ = asset.placement.position
+    root = ET.Element("mujoco", model=f"{body_name}_scene")
+    root.append(ET.Comment(f" {xml_comment_text(asset.name)} on the surface it was pushed over "))
+    ET.SubElement(root, "include", file=Path(mjcf_path).name)
+    ET.SubElement(root, "option", **SCENE_OPTIONS)
+    world = ET.SubElement(root, "worldbody")
+    world.append(ET.Comment(" the support surface: its top at the object's lowest point; the pair's friction "))
+    # size 0 0: an infinite plane; the third number is only the rendered grid's spacing [m]
+    ET.SubElement(world, "geom", name=f"{body_name}_support", type="plane",
+                  pos=_num((x, y, support_height_m(asset, out_dir))), size="0 0 0.05", **_friction(mu))
+    ET.indent(root, space="  ")
     path.write_text(ET.tostring(root, encoding="unicode") + "\n")
     return path

@@ -1,7 +1,8 @@
 """Reload the exported URDF, MJCF and USD files in real loaders and check them.
 
 Each file is read by two loaders (MJCF: MuJoCo and Newton; URDF: yourdfpy and
-Newton; USD: usd-core's UsdPhysics and Newton). For every loader the mass
+Newton; USD: usd-core's UsdPhysics and Newton); a pushed object's scene.xml by
+MuJoCo, which also lets it rest on its support plane. For every loader the mass
 [kg], COM [m] and full inertia tensor about the COM [kg m^2], in the object
 frame, are compared with `asset.theta`; so are surface friction and the
 placement where the format and the loader carry them. Any disagreement above
@@ -33,13 +34,18 @@ import numpy as np
 from assets import Asset
 from exporters.names import joint_name, mjcf_name, urdf_name, usd_prim_name
 
-__all__ = ["DEFAULT_TOLERANCE", "LOADERS", "LoaderCheck", "ValidationError", "ValidationReport", "validate_exports"]
+__all__ = ["DEFAULT_TOLERANCE", "LOADERS", "LoaderCheck", "ValidationError", "ValidationReport", "replay_pushed_mujoco",
+           "validate_exports"]
 
 DEFAULT_TOLERANCE = 1e-6
 """Largest relative error accepted (float32 storage in USD and Newton is ~6e-8)."""
 
 _COM_FLOOR_M = 1e-9
 _MJ_STEPS = 100
+_REST_S = 0.5
+"""How long a pushed object is left on its support plane in scene.xml [s] ..."""
+_REST_MOVE_M = 1e-3
+"""... and how far it may move meanwhile [m]: it settles into the soft contact by a fraction of that."""
 
 
 class ValidationError(Exception):
@@ -202,6 +208,68 @@ def _read_mujoco(asset: Asset, path: Path) -> _Reading:
         position=np.array(model.body_pos[body], dtype=float),
         quaternion_xyzw=np.array([x, y, z, w], dtype=float),
         notes=(f"stepped {_MJ_STEPS} steps ({t_s:g} s), fell {drop_m:.4g} m",),
+    )
+
+
+def _mujoco_free_body(model, asset: Asset, path: Path) -> tuple[int, int, int]:
+    """(body id, qpos address, dof address) of the asset's body on its free joint."""
+    import mujoco
+
+    name = mjcf_name(asset.name)
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+    joint = model.body_jntadr[body] if body >= 0 else -1
+    if body < 0 or model.body_jntnum[body] != 1 or model.jnt_type[joint] != mujoco.mjtJoint.mjJNT_FREE:
+        raise ValueError(f"{path}: no body {name!r} on a free joint")
+    return body, int(model.jnt_qposadr[joint]), int(model.jnt_dofadr[joint])
+
+
+def _settle(model, data, body: int, seconds: float) -> float:
+    """Step `seconds` [s] from the model's initial state; returns how far the body's origin moved [m]."""
+    import mujoco
+
+    mujoco.mj_resetData(model, data)
+    mujoco.mj_forward(model, data)
+    p0 = data.xpos[body].copy()
+    for _ in range(int(round(seconds / model.opt.timestep))):
+        mujoco.mj_step(model, data)
+    if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
+        raise ValueError(f"state not finite after {seconds:g} s on the support plane")
+    return float(np.linalg.norm(data.xpos[body] - p0))
+
+
+def _read_mujoco_scene(asset: Asset, path: Path) -> _Reading:
+    """The object as scene.xml includes it, its support plane's friction and its rest on that plane."""
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_path(str(path))
+    body, _, _ = _mujoco_free_body(model, asset, path)
+    colliding = [g for g in range(model.ngeom)
+                 if model.geom_bodyid[g] == body and (model.geom_contype[g] or model.geom_conaffinity[g])]
+    mu = _collision_mu([float(model.geom_friction[g, 0]) for g in colliding], "MuJoCo")
+    planes = [g for g in range(model.ngeom)
+              if model.geom_bodyid[g] == 0 and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
+    if len(planes) != 1:
+        raise ValueError(f"expected one support plane in the world, found {len(planes)}")
+    plane_mu = float(model.geom_friction[planes[0], 0])
+    if plane_mu != mu:  # MuJoCo takes the larger: the pair's mu only if both carry it
+        raise ValueError(f"support plane friction {plane_mu:g} differs from the object's {mu:g}")
+    if model.opt.cone != mujoco.mjtCone.mjCONE_ELLIPTIC:
+        raise ValueError("friction cone is not elliptic (a pyramidal cone is anisotropic: exporters/mjcf.py)")
+    moved = _settle(model, mujoco.MjData(model), body, _REST_S)
+    if moved > _REST_MOVE_M:
+        raise ValueError(f"the object moved {1000 * moved:.3g} mm in {_REST_S:g} s at rest on its support plane "
+                         f"(at most {1000 * _REST_MOVE_M:g} mm): the plane is not under it")
+    R = _rotation_from_wxyz(model.body_iquat[body])
+    w, x, y, z = model.body_quat[body]
+    return _Reading(
+        mass=float(model.body_mass[body]),
+        com=np.array(model.body_ipos[body], dtype=float),
+        inertia=R @ np.diag(model.body_inertia[body]) @ R.T,
+        friction=mu,
+        position=np.array(model.body_pos[body], dtype=float),
+        quaternion_xyzw=np.array([x, y, z, w], dtype=float),
+        notes=(f"rested {_REST_S:g} s on the support plane (top at z = {model.geom_pos[planes[0], 2]:.6g} m), "
+               f"moved {1000 * moved:.3g} mm",),
     )
 
 
@@ -388,8 +456,9 @@ LOADERS: dict[str, tuple[tuple[str, Reader], ...]] = {
     "mjcf": (("mujoco", _read_mujoco), ("newton.add_mjcf", _read_newton_mjcf)),
     "urdf": (("yourdfpy", _read_yourdfpy), ("newton.add_urdf", _read_newton_urdf)),
     "usd": (("pxr.UsdPhysics", _read_usd_physics), ("newton.add_usd", _read_newton_usd)),
+    "scene": (("mujoco", _read_mujoco_scene),),
 }
-"""Format key (as in asset.json → files) → (loader name, reader) pairs."""
+"""Format key (as in asset.json → files) → (loader name, reader) pairs; "scene" is a pushed object's scene.xml."""
 
 
 # --- comparison ---------------------------------------------------------------------------------
@@ -468,7 +537,7 @@ def _check(asset: Asset, fmt: str, loader: str, reader: Reader, path: Path, size
 
 
 def _paths_from(paths: Any, out_dir: Path) -> dict[str, Path]:
-    """{"mjcf"|"urdf"|"usd": absolute path} from a mapping (asset.json files) or an object with attributes."""
+    """{"mjcf"|"urdf"|"usd"|"scene": absolute path} from a mapping (asset.json files) or an object with attributes."""
     found: dict[str, Path] = {}
     for key in LOADERS:
         value = paths.get(key) if isinstance(paths, Mapping) else getattr(paths, key, None)
@@ -488,7 +557,8 @@ def validate_exports(
         out_dir: the output directory (mesh paths and relative `paths` resolve here).
         paths: the written files: a mapping with keys "urdf", "mjcf", "usd" (as
             asset.json → files; other keys ignored) or an object with those
-            attributes (e.g. `exporters.ExportPaths`). Formats left out are not checked.
+            attributes (e.g. `exporters.ExportPaths`); "scene" too where written. Formats
+            left out are not checked.
         tolerance: largest accepted relative error (see the module docstring).
         strict: raise on failure (default); with False, return the failing report.
 
@@ -718,3 +788,82 @@ def replay_jointed_mujoco(mjcf_path: Path, asset: Asset, recording, joint_fit, c
             if (step + 1) % w.substeps == 0:
                 q[(step + 1) // w.substeps - 1, k] = data.qpos[qpos]
     return q_and_position_rmse(joint_fit, q, w.q[1:])
+
+
+def replay_pushed_mujoco(scene_path: Path, asset: Asset, recording, window_s: float = 0.5, config=None) -> dict:
+    """Windowed replay of a push in MuJoCo from the exported scene.xml (the object on its support plane).
+
+    The windows are the identification's (`pipelines.identify.sliding.push_windows` with `config`, a
+    `SlidingConfig`, at `window_s` [s] and the scene's time step): back to back where the pusher touches
+    the object and it slides, the force offset of the sensor taken out as the build does
+    (`estimate_force_bias`). Each starts from the measured planar state: the tracked frame's x, y and the
+    heading of its x axis [rad] are the object frame's (the sliding model's convention), the height and
+    tilt those the object settles to on the plane; the start velocity (vx, vy [m/s], yaw rate [rad/s]) is
+    the slope of a quadratic through the poses around the start. At every step the measured horizontal
+    pusher force [N, world] acts at the measured contact point, taken at the COM's height (the height a
+    pusher meets the object at only tilts it, and planar recordings put it at z = 0), through
+    `xfrc_applied` as that force at the COM plus its moment. The recorded force is what acted; a kinematic
+    pusher would replay the pusher's path instead and need its shape and contact stiffness, which the
+    recordings do not carry. Effects in `asset.effects` are not applied.
+
+    Returns SI values: "rmse_position_m" and "rmse_heading_rad" over every pose sample of every window
+    (as asset.json → fit), "rmse_final_position_m" and "rmse_final_heading_rad" over the windows' last
+    samples, per window "t_start_s", "final_position_error_m" and "final_heading_error_rad", and
+    "windows", "window_s", "timestep_s".
+    """
+    from dataclasses import replace
+
+    import mujoco
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    from pipelines.identify.sliding import PlanarBody, SlidingConfig, estimate_force_bias, push_windows
+
+    scene_path = Path(scene_path)
+    model = mujoco.MjModel.from_xml_path(str(scene_path))
+    data = mujoco.MjData(model)
+    body, qadr, vadr = _mujoco_free_body(model, asset, scene_path)
+    _settle(model, data, body, _REST_S)
+    rest_z = float(data.qpos[qadr + 2])
+    R_rest = _rotation_from_wxyz(data.qpos[qadr + 3:qadr + 7])
+    tilt = Rotation.from_euler("z", -math.atan2(R_rest[1, 0], R_rest[0, 0])).as_matrix() @ R_rest
+
+    config = replace(config or SlidingConfig(), window_s=window_s, dt_s=float(model.opt.timestep))
+    vertices = np.concatenate([trimesh.load(scene_path.parent / rel, force="mesh", process=False).vertices
+                               for rel in asset.geometry.collision])
+    inertial = asset.theta.inertial()
+    planar = PlanarBody(tuple(0.5 * (vertices.max(axis=0) - vertices.min(axis=0))), inertial.mass,
+                        float(inertial.inertia_matrix()[2, 2]))
+    w = push_windows(recording, planar, config, estimate_force_bias(recording, config))
+    model.opt.timestep = w.dt_s
+    force, contact = w.window_force, w.contact
+    S, W = w.sample_count, w.window_count
+    simulated = np.zeros((S, W, 3))
+    for k in range(W):
+        x, y, yaw, vx, vy, yaw_rate = w.start[k]
+        R = Rotation.from_euler("z", yaw).as_matrix() @ tilt
+        mujoco.mj_resetData(model, data)
+        data.qpos[qadr:qadr + 3] = (x, y, rest_z)
+        data.qpos[qadr + 3:qadr + 7] = np.roll(Rotation.from_matrix(R).as_quat(), 1)  # MuJoCo: w x y z
+        data.qvel[vadr:vadr + 3] = (vx, vy, 0.0)  # free joint: the body origin's velocity, world axes
+        data.qvel[vadr + 3:vadr + 6] = R.T @ np.array([0.0, 0.0, yaw_rate])  # and body-axes angular velocity
+        mujoco.mj_forward(model, data)
+        for step in range(w.step_count):
+            f = np.array([*force[step, k], 0.0])
+            arm = np.array([*(contact[step, k] - data.xipos[body, :2]), 0.0])
+            data.xfrc_applied[body] = np.r_[f, np.cross(arm, f)]
+            mujoco.mj_step(model, data)
+            if (step + 1) % w.substeps == 0:
+                # qpos, not xpos: mj_step leaves the kinematics at the state before its integration
+                x_axis = _rotation_from_wxyz(data.qpos[qadr + 3:qadr + 7])[:, 0]
+                heading = math.atan2(x_axis[1], x_axis[0])
+                simulated[(step + 1) // w.substeps - 1, k] = (*data.qpos[qadr:qadr + 2], heading)
+    measured = w.measured[1:]
+    position = np.linalg.norm(simulated[..., :2] - measured[..., :2], axis=-1)
+    heading = np.angle(np.exp(1j * (simulated[..., 2] - measured[..., 2])))  # the short way round
+    rms = lambda e: float(np.sqrt(np.mean(np.square(e))))  # noqa: E731
+    return {"rmse_position_m": rms(position), "rmse_heading_rad": rms(heading),
+            "rmse_final_position_m": rms(position[-1]), "rmse_final_heading_rad": rms(heading[-1]),
+            "t_start_s": w.t_start_s.tolist(), "final_position_error_m": position[-1].tolist(),
+            "final_heading_error_rad": np.abs(heading[-1]).tolist(),
+            "windows": int(W), "window_s": float(w.span_s), "timestep_s": float(w.dt_s)}
