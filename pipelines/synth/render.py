@@ -23,7 +23,7 @@ import numpy as np
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["RenderConfig", "look_at", "render_mesh_image", "render_scan"]
+__all__ = ["RenderConfig", "look_at", "render_mesh_image", "render_scan", "render_views"]
 
 
 @dataclass(frozen=True)
@@ -119,8 +119,46 @@ def render_scan(
     Returns:
         out_dir.
     """
-    import open3d as o3d
     import trimesh
+
+    rng = np.random.default_rng(0) if rng is None else rng
+    vertices = np.asarray(mesh_world.vertices, dtype=np.float64)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    table = trimesh.creation.box(extents=(*config.table_size_m, config.table_thickness_m))
+    table.apply_translation((centre[0], centre[1], lo[2] - 0.5 * config.table_thickness_m))
+    poses = _camera_poses(config, centre, rng)
+    return render_views(mesh_world, [table], poses, out_dir, config, rng, name, material_hint)
+
+
+def render_views(
+    part_world: "trimesh.Trimesh",
+    surroundings: "list[trimesh.Trimesh]",
+    poses: list[np.ndarray],
+    out_dir: Path,
+    config: RenderConfig = RenderConfig(),
+    rng: np.random.Generator | None = None,
+    name: str = "object",
+    material_hint: str | None = None,
+) -> Path:
+    """Raytrace the part among its surroundings from the given cameras and write the scan to `out_dir`.
+
+    Depth covers the whole scene; masks mark the part only (what a segmenter given the part would mark).
+
+    Args:
+        part_world: trimesh.Trimesh in world coordinates [m]: the masked object.
+        surroundings: other meshes in world coordinates [m] (table, furniture carcass, floor), unmasked
+            and shaded with `table_rgb`.
+        poses: camera-to-world [4, 4], OpenCV axes (z forward, y down), one per frame.
+        out_dir: the scan directory to write (created; existing files are overwritten).
+        config: image size, focal lengths, sensor noise, shading.
+        rng: the noise and dropout; default seed 0.
+        name, material_hint: written to object.json.
+
+    Returns:
+        out_dir.
+    """
+    import open3d as o3d
     from PIL import Image
 
     rng = np.random.default_rng(0) if rng is None else rng
@@ -128,27 +166,22 @@ def render_scan(
     for sub in ("images", "depth") + (("masks",) if config.write_masks else ()):
         (out_dir / sub).mkdir(parents=True, exist_ok=True)
 
-    vertices = np.asarray(mesh_world.vertices, dtype=np.float64)
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    centre = 0.5 * (lo + hi)
-    table = trimesh.creation.box(extents=(*config.table_size_m, config.table_thickness_m))
-    table.apply_translation((centre[0], centre[1], lo[2] - 0.5 * config.table_thickness_m))
-
     scene = o3d.t.geometry.RaycastingScene()
     object_id = scene.add_triangles(
-        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(np.asarray(mesh_world.faces, dtype=np.uint32))
+        o3d.core.Tensor(np.asarray(part_world.vertices, dtype=np.float32)),
+        o3d.core.Tensor(np.asarray(part_world.faces, dtype=np.uint32)),
     )
-    scene.add_triangles(
-        o3d.core.Tensor(np.asarray(table.vertices, dtype=np.float32)),
-        o3d.core.Tensor(np.asarray(table.faces, dtype=np.uint32)),
-    )
+    for other in surroundings:
+        scene.add_triangles(
+            o3d.core.Tensor(np.asarray(other.vertices, dtype=np.float32)),
+            o3d.core.Tensor(np.asarray(other.faces, dtype=np.uint32)),
+        )
 
     w, h = config.width, config.height
     cx, cy = 0.5 * w, 0.5 * h
     u, v = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)  # pixel centres
     rays_camera = np.stack([(u - cx) / config.fx, (v - cy) / config.fy, np.ones_like(u)], axis=-1)
 
-    poses = _camera_poses(config, centre, rng)
     frames = []
     for i, T_world_camera in enumerate(poses):
         R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]

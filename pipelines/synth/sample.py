@@ -10,9 +10,8 @@ import numpy as np
 
 from assets import Inertial, Pose
 
-from ..logs import PoseTrack, WrenchTrack
-from .held import ConcealedEffect, HeldMotionConfig, SensorNoise, measure, simulate_held
-from .recording import write_recording
+from .held import ConcealedEffect, HeldMotionConfig, SensorNoise, simulate_held
+from .mujoco_engine import MujocoSettings, write_motion_recording
 from .render import RenderConfig, render_scan
 
 
@@ -36,12 +35,35 @@ class HeldSampleConfig:
     """Physics hidden in both recordings; recorded in truth.json."""
 
 
-def make_held_sample(mesh, out_dir: Path, config: HeldSampleConfig = HeldSampleConfig()) -> Path:
+ENGINES = ("newton", "mujoco")
+
+
+def _check_engine(engine: str, wrench_frame: str) -> None:
+    from .mujoco_engine import WRENCH_FRAMES
+
+    if engine not in ENGINES:
+        raise ValueError(f"engine: expected one of {ENGINES}, got {engine!r}")
+    if wrench_frame not in WRENCH_FRAMES:
+        raise ValueError(f"wrench_frame: expected one of {WRENCH_FRAMES}, got {wrench_frame!r}")
+
+
+def _engine_doc(engine: str, wrench_frame: str, mujoco: MujocoSettings) -> dict:
+    doc = {"engine": engine, "wrench_frame": wrench_frame}
+    if engine == "mujoco":
+        doc["mujoco"] = asdict(mujoco)
+    return doc
+
+
+def make_held_sample(mesh, out_dir: Path, config: HeldSampleConfig = HeldSampleConfig(), *, engine: str = "newton",
+                     wrench_frame: str = "gripper", mujoco: MujocoSettings = MujocoSettings()) -> Path:
     """Write out_dir/{scan/, trial.mcap, heldout.mcap, truth.json} for `mesh` (metres, any frame).
 
     The mesh is given uniform density for `mass_kg`, turned by the yaw and set on
     the table; the robot grasps it above its centroid, gripper pointing down.
+    engine: "newton" (`simulate_held`) or "mujoco" (`simulate_held_mujoco` under `mujoco`);
+    wrench_frame: "gripper" (the sensor's axes, turning with the tracked frame) or "world".
     """
+    _check_engine(engine, wrench_frame)
     import trimesh
     from scipy.spatial.transform import Rotation
 
@@ -74,14 +96,14 @@ def make_held_sample(mesh, out_dir: Path, config: HeldSampleConfig = HeldSampleC
 
     recordings = {}
     for name in ("trial", "heldout"):
-        motion = simulate_held(truth, placement, grasp, config.motion, rng, effect=config.effect)
-        t_pose, position, quat, t_wrench, force, torque = measure(motion, config.noise, rng, effect=config.effect)
-        path = out_dir / f"{name}.mcap"
-        write_recording(
-            path,
-            pose=PoseTrack(t_pose, position, quat, "world", "gripper", "/tracker/pose"),
-            wrench=WrenchTrack(t_wrench, force, torque, "/ft_sensor/wrench", "gripper"),
-        )
+        if engine == "mujoco":
+            from .mujoco_engine import simulate_held_mujoco
+
+            motion = simulate_held_mujoco(truth, placement, grasp, config.motion, rng, mujoco, effect=config.effect)
+        else:
+            motion = simulate_held(truth, placement, grasp, config.motion, rng, effect=config.effect)
+        path = write_motion_recording(out_dir / f"{name}.mcap", motion, config.noise, rng, wrench_frame,
+                                      effect=config.effect)
         recordings[name] = path.name
 
     doc = {
@@ -97,6 +119,7 @@ def make_held_sample(mesh, out_dir: Path, config: HeldSampleConfig = HeldSampleC
         "grasp_in_object": {"position": list(grasp.position), "quaternion_xyzw": list(grasp.quaternion_xyzw)},
         "recordings": recordings,
         "effect": {"name": config.effect.name, "params": config.effect.params} if config.effect else None,
+        **_engine_doc(engine, wrench_frame, mujoco),
         "config": _jsonable(asdict(config)),
     }
     (out_dir / "truth.json").write_text(json.dumps(doc, indent=2) + "\n")
@@ -123,11 +146,21 @@ class JointedSampleConfig:
     effect: ConcealedEffect | None = None
     """A passive joint force (viscous_damping, spring, stribeck_friction) hidden in both recordings;
     recorded in truth.json."""
+    furniture: bool = False
+    """Scan the part in its furniture, from the front, masks on the part only (`render_furniture_scan`, with
+    `render`'s image, view count and noise) instead of alone on a table; the carcass is written as base.obj."""
 
 
-def make_jointed_sample(out_dir: Path, config: JointedSampleConfig = JointedSampleConfig()) -> Path:
-    """Write out_dir/{scan/, part.obj, trial.mcap, heldout.mcap, truth.json} for one of RigPI's jointed objects."""
-    from .jointed import JointedMotionConfig, jointed_paper_objects, simulate_jointed, write_jointed_recording
+def make_jointed_sample(out_dir: Path, config: JointedSampleConfig = JointedSampleConfig(), *,
+                        engine: str = "newton", wrench_frame: str = "gripper",
+                        mujoco: MujocoSettings = MujocoSettings()) -> Path:
+    """Write out_dir/{scan/, part.obj, trial.mcap, heldout.mcap, truth.json} (and base.obj in furniture) for one
+    of RigPI's jointed objects.
+
+    engine, wrench_frame, mujoco: as for `make_held_sample` (`simulate_jointed` or `simulate_jointed_mujoco`)."""
+    from .jointed import JointedMotionConfig, jointed_paper_objects, simulate_jointed
+
+    _check_engine(engine, wrench_frame)
 
     objects = jointed_paper_objects()
     if config.object not in objects:
@@ -138,13 +171,25 @@ def make_jointed_sample(out_dir: Path, config: JointedSampleConfig = JointedSamp
     out_dir.mkdir(parents=True, exist_ok=True)
     mesh_world = obj.mesh()
     mesh_world.apply_translation(obj.position_m)
-    render_scan(mesh_world, out_dir / "scan", config.render, rng, name=obj.name, material_hint=None)
+    if config.furniture:
+        from .furniture import FurnitureConfig, furniture_carcass, render_furniture_scan
+
+        render_furniture_scan(obj, out_dir / "scan", FurnitureConfig(render=config.render), rng)
+        furniture_carcass(obj).export(out_dir / "base.obj")
+    else:
+        render_scan(mesh_world, out_dir / "scan", config.render, rng, name=obj.name, material_hint=None)
     mesh_world.export(out_dir / "part.obj")
     recordings = {}
     for name in ("trial", "heldout"):
-        motion = simulate_jointed(obj, JointedMotionConfig(duration_s=config.motion_duration_s), rng,
-                                  effect=config.effect)
-        recordings[name] = write_jointed_recording(out_dir / f"{name}.mcap", obj, motion, config.noise, rng).name
+        motion_config = JointedMotionConfig(duration_s=config.motion_duration_s)
+        if engine == "mujoco":
+            from .mujoco_engine import simulate_jointed_mujoco
+
+            motion = simulate_jointed_mujoco(obj, motion_config, rng, mujoco, effect=config.effect)
+        else:
+            motion = simulate_jointed(obj, motion_config, rng, effect=config.effect)
+        recordings[name] = write_motion_recording(out_dir / f"{name}.mcap", motion.held, config.noise, rng,
+                                                  wrench_frame, joint=(f"{obj.name}_joint", motion)).name
     truth = obj.inertial()
     doc = {
         "name": obj.name, "kind": obj.joint_type,
@@ -154,6 +199,7 @@ def make_jointed_sample(out_dir: Path, config: JointedSampleConfig = JointedSamp
                   "friction": obj.friction, "travel": list(obj.travel)},
         "recordings": recordings,
         "effect": {"name": config.effect.name, "params": config.effect.params} if config.effect else None,
+        **_engine_doc(engine, wrench_frame, mujoco),
         "config": _jsonable(asdict(config)),
     }
     (out_dir / "truth.json").write_text(json.dumps(doc, indent=2) + "\n")
