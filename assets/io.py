@@ -42,7 +42,8 @@ def asset_to_json(asset: Asset) -> dict:
         },
         "material": asdict(asset.material),
         "geometry": {"visual": asset.geometry.visual, "collision": list(asset.geometry.collision),
-                     **({"base": asset.geometry.base} if asset.geometry.base else {})},
+                     **({"base": asset.geometry.base} if asset.geometry.base else {}),
+                     **({"extent": asset.geometry.extent} if asset.geometry.extent else {})},
         "effects": [asdict(e) for e in asset.effects],
         "unexplained": list(asset.unexplained),
         "flags": list(asset.flags),
@@ -273,7 +274,7 @@ def asset_from_json(doc, path: Path | str | None = None) -> Asset:
     p = c.object("placement", doc["placement"], ("position", "quaternion_xyzw"), ())
     placement = Pose(tuple(c.array("placement.position", p["position"], (3,))),
                      tuple(c.unit("placement.quaternion_xyzw", p["quaternion_xyzw"], 4, "quaternion")))
-    g = c.object("geometry", doc["geometry"], ("visual", "collision"), ("base",))
+    g = c.object("geometry", doc["geometry"], ("visual", "collision"), ("base", "extent"))
     m = c.object("material", doc["material"], ("name", "density", "friction"),
                  ("restitution", "text", "source", "match_score"))
     c.string("material.name", m["name"])
@@ -293,7 +294,8 @@ def asset_from_json(doc, path: Path | str | None = None) -> Asset:
         theta=_theta(c, doc["theta"]),
         geometry=Geometry(c.string("geometry.visual", g["visual"]),
                           tuple(c.list("geometry.collision", g["collision"], c.string)),
-                          c.string("geometry.base", g.get("base"), optional=True)),
+                          c.string("geometry.base", g.get("base"), optional=True),
+                          c.object("geometry.extent", g["extent"]) if g.get("extent") is not None else None),
         material=Material(**m),
         joint=_joint(c, doc.get("joint"), kind),
         effects=tuple(_effect(c, f"effects.{i}", e) for i, e in enumerate(c.list("effects", doc.get("effects", [])))),

@@ -207,6 +207,10 @@ class Geometry:
     collision: tuple[str, ...]
     base: str | None = None
     """Jointed kinds: mesh of the fixed base, world frame (optional)."""
+    extent: dict | None = None
+    """How the closed solid was made from what the scan saw ("closing", "seen", "assumed" with the
+    assumed sizes and their uncertainty): a part scanned in its furniture is extruded from its front by a
+    thickness that may be assumed."""
 
 
 @dataclass(frozen=True)

@@ -261,7 +261,7 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
             kind=detection.kind,
             placement=placement,
             theta=theta,
-            geometry=Geometry("meshes/visual.obj", collision),
+            geometry=Geometry("meshes/visual.obj", collision, extent=scan_stats.get("extent")),
             material=choice.material(prior.material.name, float(theta.mass.value / mesh_object.volume),
                                      theta.friction.value),
             fit=fit,
@@ -276,6 +276,9 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
         if detection.kind == "free":
             replay = _replay_free(timer, tmp / files["mjcf"], asset, holdout or trials[0], X_tracked_body,
                                   fit.window_s, diagnosis, log)
+        else:
+            replay = _replay_pushed(timer, tmp / files["scene"], asset, holdout or trials[0], fit.window_s, sconfig,
+                                    log)
         provenance = {
             "config": json.loads(json.dumps(asdict(config), default=str)),
             "scan": scan_stats,
@@ -331,6 +334,18 @@ def _replay_free(timer, mjcf_path, asset, recording, X_tracked_body, window_s, d
     return {"recording": str(recording.path), "mujoco": mujoco, "newton": {"rmse_position_m": newton},
             "mujoco_over_newton": mujoco["rmse_position_m"] / newton if newton > 0 else None,
             "noise_floor_m": floor, "mujoco_over_noise_floor": mujoco["rmse_position_m"] / floor if floor else None}
+
+
+def _replay_pushed(timer, scene_path, asset, recording, window_s, sconfig, log) -> dict:
+    """The exported MJCF in its scene (a plane carrying the identified friction) replaying the evaluation
+    recording's pushes in MuJoCo, on the windows Newton's replay of the fit used."""
+    from pipelines.validate import replay_pushed_mujoco
+
+    mujoco = timer.run("replay (MuJoCo)", replay_pushed_mujoco, scene_path, asset, recording, window_s, sconfig)
+    newton = asset.fit.final.rmse_position_m
+    log(f"replay of {Path(recording.path).name}: MuJoCo {1000 * mujoco['rmse_position_m']:.3f} mm, "
+        f"Newton {1000 * newton:.3f} mm")
+    return {"recording": str(recording.path), "mujoco": mujoco, "newton": {"rmse_position_m": newton}}
 
 
 @dataclass(frozen=True)

@@ -124,6 +124,13 @@ class Synth:
     viscous_damping, spring or stribeck_friction on the joint."""
     effect_magnitude: float = 2.0
     """Size of the concealed effect as a multiple of the sensor's noise (see twin/bench/diagnose.py)."""
+    engine: Literal["newton", "mujoco"] = "newton"
+    """Simulator that makes the recordings: twin's own Newton models, or MuJoCo's (a PD-servoed robot, joint
+    frictionloss, its integrator): a truth the identification does not share."""
+    wrench_frame: Literal["gripper", "world"] = "gripper"
+    """Frame of the wrench messages: the sensor's, turning with the gripper, or world."""
+    furniture: bool = False
+    """With --object: scan the part as it stands in its furniture (a chest, a cabinet, an oven), from the front."""
 
 
 @dataclass(frozen=True)
@@ -275,7 +282,9 @@ def _run_synth(args: Synth) -> None:
             _log(f"concealing {effect.name} {effect.params}")
         _log(f"synthesising {args.object} into {args.output}")
         with staged_output(args.output, args.force, replace_own=False, made_by="synth") as tmp:
-            make_jointed_sample(tmp, JointedSampleConfig(object=args.object, seed=args.seed, effect=effect))
+            make_jointed_sample(tmp, JointedSampleConfig(object=args.object, seed=args.seed, effect=effect,
+                                                         furniture=args.furniture),
+                                engine=args.engine, wrench_frame=args.wrench_frame)
         _log(f"wrote {args.output}")
         return
 
@@ -298,7 +307,7 @@ def _run_synth(args: Synth) -> None:
                               effect=effect)
     _log(f"synthesising {args.shape} into {args.output}")
     with staged_output(args.output, args.force, replace_own=False, made_by="synth") as tmp:
-        make_held_sample(mesh, tmp, config)
+        make_held_sample(mesh, tmp, config, engine=args.engine, wrench_frame=args.wrench_frame)
     _log(f"wrote {args.output}")
 
 

@@ -30,11 +30,24 @@ def bounds_flags(theta, lower, upper) -> tuple[dict, ...]:
     return tuple(flags)
 
 
+def extent_flags(extent: dict | None) -> tuple[dict, ...]:
+    """A part whose depth no view saw (a door or drawer front scanned in its furniture) was closed with an
+    assumed thickness: its volume, mass prior and inertia rest on that assumption."""
+    if not extent or not extent.get("assumed"):
+        return ()
+    return tuple({"parameter": "geometry", "problem": f"{name.removesuffix('_m')} assumed, not seen",
+                  **({"value": v.get("value"), "std": v.get("std"), "from": v.get("from")} if isinstance(v, dict) else {})}
+                 for name, v in extent["assumed"].items())
+
+
 def flag_line(flag: dict) -> str:
     value = flag.get("value")
     bounds = flag.get("bounds")
     if flag.get("parameter") == "mass" and bounds:
         return f"mass {value:.4g} kg is {flag['problem']} [{bounds[0]:.4g}, {bounds[1]:.4g}] kg"
+    if flag.get("parameter") == "geometry" and flag.get("value") is not None:
+        return (f"{flag['problem']}: {1000 * flag['value']:.1f} +- {1000 * (flag.get('std') or 0):.1f} mm "
+                f"({flag.get('from', '')})")
     return f"{flag.get('parameter', '?')}: {flag.get('problem', '')}"
 
 
