@@ -183,6 +183,10 @@ class Bench:
     """reconstruct: depth-noise levels to run (low, high, sensor; default all), without the noise-free scans."""
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
+    engine: Literal["newton", "mujoco", "both"] = "both"
+    """paper: the simulator that makes the recordings: twin's own Newton models (those identification fits),
+    MuJoCo (a PD-servoed robot; it follows the same references only as closely as its servos do), or both,
+    one row each; a target is met when it holds on every engine."""
     concealed: int = 40
     """Recordings with a concealed effect (diagnose)."""
     clean: int = 10
@@ -464,12 +468,12 @@ def _dispatch(command) -> None:
         elif command.jointed_only:
             from twin.bench.paper_jointed import bench_paper_jointed
 
-            bench_paper_jointed(command.seeds)
+            bench_paper_jointed(command.seeds, engine=command.engine)
         else:
             from twin.bench.paper import bench_paper
 
             bench_paper(command.seeds, paper_optimizer=command.paper_optimizer,
-                        from_vlm_starts=command.vlm_starts)
+                        from_vlm_starts=command.vlm_starts, engine=command.engine)
 
 
 if __name__ == "__main__":

@@ -12,6 +12,18 @@ import numpy as np
 # RigPI (Table I): relative errors of mass and of Ixx, Iyy, Izz [%] on its free objects.
 RIGPI_FREE = {"cube": (1.5, (8.6, 6.4, 7.1)), "sphere": (3.5, (7.4, 4.2, 8.2)), "apple": (1.7, (13.9, 6.6, 12.3))}
 
+ENGINE_CHOICES = {"newton": ("newton",), "mujoco": ("mujoco",), "both": ("newton", "mujoco")}
+"""The simulators that make a bench's recordings: twin's own Newton models (the ones identification fits)
+or MuJoCo (`pipelines.synth.mujoco_engine`, a PD-servoed robot), so that a figure is not only measured on
+the model it assumes."""
+
+
+def engines(choice: str) -> tuple[str, ...]:
+    """The engines an `engine` choice ("newton", "mujoco" or "both") runs, in table order."""
+    if choice not in ENGINE_CHOICES:
+        raise ValueError(f"engine: expected one of {tuple(ENGINE_CHOICES)}, got {choice!r}")
+    return ENGINE_CHOICES[choice]
+
 
 def paper_objects() -> dict:
     """Synthetic analogues of RigPI's free objects (truth in notes/anchors.md): mesh [m] and mass [kg].
@@ -30,10 +42,14 @@ def paper_objects() -> dict:
     }
 
 
-def paper_cases(seeds: int, duration_s: float, tmp: Path, names: tuple[str, ...] | None = None):
+def paper_cases(seeds: int, duration_s: float, tmp: Path, names: tuple[str, ...] | None = None,
+                engine: str = "newton"):
     """The recordings `bench_paper` makes (same objects, motions and noise draws), read back from MCAP.
 
-    Yields (name, truth, placement, prior, bounds, seed, trial, heldout) per object and seed.
+    engine: "newton" (`simulate_held`) or "mujoco" (`simulate_held_mujoco`, default settings); both track
+    the same multisine references and get the same noise draws, but MuJoCo's servoed robot only follows
+    its reference, so the motions differ. Yields (name, truth, placement, prior, bounds, seed, trial,
+    heldout) per object and seed.
     """
     from assets import Inertial, Pose
     from assets.materials import material_range
@@ -41,8 +57,10 @@ def paper_cases(seeds: int, duration_s: float, tmp: Path, names: tuple[str, ...]
     from pipelines.logs import PoseTrack, WrenchTrack, read_recording
     from pipelines.priors import uniform_density_prior
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
+    from pipelines.synth.mujoco_engine import simulate_held_mujoco
     from pipelines.synth.recording import write_recording
 
+    simulate = {"newton": simulate_held, "mujoco": simulate_held_mujoco}[engine]
     for k, (name, (mesh, mass)) in enumerate(paper_objects().items()):
         if names is not None and name not in names:
             continue
@@ -56,13 +74,13 @@ def paper_cases(seeds: int, duration_s: float, tmp: Path, names: tuple[str, ...]
         bounds = InertialBounds(prior.lower, prior.upper)
         motion_rng = np.random.default_rng(1000 + k)
         config = HeldMotionConfig(duration_s=duration_s)
-        motions = {trial: simulate_held(truth, placement, grasp, config, motion_rng) for trial in ("trial", "heldout")}
+        motions = {trial: simulate(truth, placement, grasp, config, motion_rng) for trial in ("trial", "heldout")}
         for seed in range(seeds):
             noise_rng = np.random.default_rng(seed)
             recordings = {}
             for trial, motion in motions.items():
                 t_pose, position, quat, t_wrench, force, torque = measure(motion, SensorNoise(), noise_rng)
-                path = tmp / f"{name}-{seed}-{trial}.mcap"
+                path = tmp / f"{name}-{engine}-{seed}-{trial}.mcap"
                 write_recording(path, pose=PoseTrack(t_pose, position, quat, "world", "gripper", "/tracker/pose"),
                                 wrench=WrenchTrack(t_wrench, force, torque, "/ft_sensor/wrench", "gripper"))
                 recordings[trial] = read_recording(path)
@@ -83,45 +101,59 @@ def vlm_starts(name: str, truth, prior) -> dict:
 
 
 def bench_paper(seeds: int = 5, duration_s: float = 10.0, paper_optimizer: bool = False,
-                from_vlm_starts: bool = False) -> list[dict]:
+                from_vlm_starts: bool = False, engine: str = "both") -> list[dict]:
     """Each paper object held and moved for `duration_s`, recorded with `seeds` noise draws at the ATI
-    sensor's resolution; identified through the MCAP files like a build; errors and spread per estimator.
+    sensor's resolution; identified through the MCAP files like a build; errors and spread per estimator
+    and engine (`engines`), then the jointed objects under the same engines.
 
     With `paper_optimizer`, RigPI's own scheme (plain pose loss, 1/100-scale gradient steps) also
     runs on the same windows, started from the prior. With `from_vlm_starts`, the Newton fit also
     runs alone from each of `vlm_starts` (no least-squares start)."""
+    from twin.bench.paper_jointed import bench_paper_jointed
+
+    rows = free_rows(seeds, duration_s, paper_optimizer, from_vlm_starts, engine)
+    _print_paper_table(rows)
+    return rows + bench_paper_jointed(seeds, engine=engine)
+
+
+def free_rows(seeds: int, duration_s: float, paper_optimizer: bool = False, from_vlm_starts: bool = False,
+              engine: str = "both", names: tuple[str, ...] | None = None) -> list[dict]:
+    """`bench_paper`'s rows of the free objects (`names`, default all): one per object, estimator and
+    engine, in that order."""
     from pipelines.identify import IdentifyConfig, identify_free_body, identify_held, tracked_to_object
     from pipelines.identify.held import windows_from_recordings
 
     estimates: dict = {}
     truths: dict = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        for name, truth, placement, prior, bounds, _, trial, heldout in paper_cases(seeds, duration_s, Path(tmp)):
-            truths[name] = truth
-            X = tracked_to_object(trial, placement)
-            held = identify_held([trial], heldout, X, prior.inertial, bounds, IdentifyConfig())
-            found = {
-                "least_squares": (held.least_squares.inertial, held.least_squares.covariance),
-                "newton": (held.newton.inertial, held.newton.covariance),
-                "kept": (held.inertial, held.covariance),
-            }
-            if paper_optimizer:
-                paper = IdentifyConfig(optimizer="paper", smoothing_hz=None)
-                rigpi = identify_free_body(windows_from_recordings([trial], paper), X, [prior.inertial], bounds, paper)
-                found["rigpi_scheme"] = (rigpi.inertial, rigpi.covariance)
-            if from_vlm_starts:
-                windows = windows_from_recordings([trial], IdentifyConfig())
-                for label, start in vlm_starts(name, truth, prior.inertial).items():
-                    fit = identify_free_body(windows, X, [start], bounds, IdentifyConfig())
-                    found[f"newton from {label}"] = (fit.inertial, fit.covariance)
-            for estimator, value in found.items():
-                estimates.setdefault((name, estimator), []).append(value)
-    rows = [{"object": name, "estimator": estimator, **_spread(values, truths[name])}
-            for (name, estimator), values in estimates.items()]
-    _print_paper_table(rows)
-    from twin.bench.paper_jointed import bench_paper_jointed
-
-    return rows + bench_paper_jointed(seeds)
+    for sim in engines(engine):
+        with tempfile.TemporaryDirectory() as tmp:
+            for name, truth, placement, prior, bounds, _, trial, heldout in paper_cases(seeds, duration_s, Path(tmp),
+                                                                                        names, sim):
+                truths[name] = truth
+                X = tracked_to_object(trial, placement)
+                held = identify_held([trial], heldout, X, prior.inertial, bounds, IdentifyConfig())
+                found = {
+                    "least_squares": (held.least_squares.inertial, held.least_squares.covariance),
+                    "newton": (held.newton.inertial, held.newton.covariance),
+                    "kept": (held.inertial, held.covariance),
+                }
+                if paper_optimizer:
+                    paper = IdentifyConfig(optimizer="paper", smoothing_hz=None)
+                    rigpi = identify_free_body(windows_from_recordings([trial], paper), X, [prior.inertial], bounds,
+                                               paper)
+                    found["rigpi_scheme"] = (rigpi.inertial, rigpi.covariance)
+                if from_vlm_starts:
+                    windows = windows_from_recordings([trial], IdentifyConfig())
+                    for label, start in vlm_starts(name, truth, prior.inertial).items():
+                        fit = identify_free_body(windows, X, [start], bounds, IdentifyConfig())
+                        found[f"newton from {label}"] = (fit.inertial, fit.covariance)
+                for estimator, value in found.items():
+                    estimates.setdefault((name, estimator, sim), []).append(value)
+    # the engines' rows of one object and estimator side by side
+    pairs = dict.fromkeys((name, estimator) for name, estimator, _ in estimates)
+    return [{"object": name, "estimator": estimator, "engine": sim,
+             **_spread(estimates[name, estimator, sim], truths[name])}
+            for name, estimator in pairs for sim in engines(engine) if (name, estimator, sim) in estimates]
 
 
 def _spread(estimates, truth) -> dict:
@@ -151,13 +183,15 @@ def _spread(estimates, truth) -> dict:
 
 
 def _print_paper_table(rows: list[dict]) -> None:
-    print(f"{'object':7} {'estimator':24} {'mass %':>7} {'max':>6} {'principal moments % (mean |err|)':>33} "
-          f"{'max':>6} {'COM mm':>7} {'CV m %':>7} {'CV I %':>7} {'95% cover':>9}")
+    print(f"{'object':7} {'estimator':24} {'engine':7} {'mass %':>7} {'max':>6} "
+          f"{'principal moments % (mean |err|)':>33} {'max':>6} {'COM mm':>7} {'CV m %':>7} {'CV I %':>7} "
+          f"{'95% cover':>9}")
     for r in rows:
         pm = " ".join(f"{x:6.2f}" for x in r["inertia_error_pct"])
-        print(f"{r['object']:7} {r['estimator']:24} {r['mass_error_pct']:7.2f} {r['mass_error_max_pct']:6.2f} "
-              f"{pm:>33} {r['inertia_error_max_pct']:6.2f} {r['com_error_max_mm']:7.3f} {r['mass_cv_pct']:7.2f} "
-              f"{r['inertia_cv_pct']:7.2f} {r['interval_coverage']:9.2f}")
+        print(f"{r['object']:7} {r['estimator']:24} {r['engine']:7} {r['mass_error_pct']:7.2f} "
+              f"{r['mass_error_max_pct']:6.2f} {pm:>33} {r['inertia_error_max_pct']:6.2f} {r['com_error_max_mm']:7.3f} "
+              f"{r['mass_cv_pct']:7.2f} {r['inertia_cv_pct']:7.2f} {r['interval_coverage']:9.2f}")
     for name, (m, inertia) in RIGPI_FREE.items():
         pm = " ".join(f"{x:6.2f}" for x in inertia)
-        print(f"{name:7} {'RigPI (paper)':24} {m:7.2f} {'':>6} {pm:>33} {'':>6} {'':>7} {'5.6-12.5':>7} {'11-22':>7}")
+        print(f"{name:7} {'RigPI (paper)':24} {'-':7} {m:7.2f} {'':>6} {pm:>33} {'':>6} {'':>7} {'5.6-12.5':>7} "
+              f"{'11-22':>7}")

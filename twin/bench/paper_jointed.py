@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import tempfile
 from pathlib import Path
 
@@ -28,9 +29,11 @@ def jointed_truth(obj) -> dict:
     return truth
 
 
-def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0) -> list[dict]:
+def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0, engine: str = "both") -> list[dict]:
     """Each jointed object worked for `duration_s` twice (trial, held-out), recorded with `seeds` noise draws;
-    kind, joint and physics found from the MCAP files as a build does. Prints one row per object."""
+    kind, joint and physics found from the MCAP files as a build does. Prints one row per object and engine
+    (`twin.bench.paper.engines`): Newton's computed-effort robot or MuJoCo's servoed hand welded to the handle,
+    on the same joint reference and noise draws."""
     from assets.materials import material_range
     from pipelines.identify.jointed import identify_jointed
     from pipelines.identify.kind import detect_kind
@@ -40,20 +43,24 @@ def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0) -> list[dict]:
     from pipelines.synth.jointed import (
         JointedMotionConfig, jointed_paper_objects, simulate_jointed, write_jointed_recording,
     )
+    from pipelines.synth.mujoco_engine import simulate_jointed_mujoco
+    from twin.bench.paper import engines
 
+    simulators = {"newton": simulate_jointed, "mujoco": simulate_jointed_mujoco}
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for k, (name, obj) in enumerate(jointed_paper_objects().items()):
+        for (k, (name, obj)), sim in itertools.product(enumerate(jointed_paper_objects().items()), engines(engine)):
+            # a fresh generator per engine: both draw the same joint reference and push offsets
             motion_rng = np.random.default_rng(2000 + k)
             config = JointedMotionConfig(duration_s=duration_s)
-            motions = {trial: simulate_jointed(obj, config, motion_rng) for trial in ("trial", "heldout")}
+            motions = {trial: simulators[sim](obj, config, motion_rng) for trial in ("trial", "heldout")}
             prior = uniform_density_prior(obj.mesh(), material_range(None))
             truth = jointed_truth(obj)
             found = []
             for seed in range(seeds):
                 rng = np.random.default_rng(seed)
-                rec = {trial: read_recording(write_jointed_recording(Path(tmp) / f"{name}-{seed}-{trial}.mcap", obj,
-                                                                     m, SensorNoise(), rng))
+                rec = {trial: read_recording(write_jointed_recording(Path(tmp) / f"{name}-{sim}-{seed}-{trial}.mcap",
+                                                                     obj, m, SensorNoise(), rng))
                        for trial, m in motions.items()}
                 detection = detect_kind(rec["trial"])
                 joint = detection.joint
@@ -75,7 +82,7 @@ def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0) -> list[dict]:
                         entry["selected"] = result.selected
                         entry["prior_mass_covered"] = bool(prior.lower[0] <= obj.mass_kg <= prior.upper[0])
                 found.append(entry)
-            rows.append(_row(name, obj, truth, found))
+            rows.append(_row(name, obj, truth, found) | {"engine": sim})
     rows.append(random_joint_cases(20))
     _print(rows)
     return rows
@@ -98,7 +105,7 @@ def random_joint_cases(count: int, seed: int = 7) -> dict:
             if point is not None:
                 d = found.joint.origin - point
                 points.append(1000 * np.linalg.norm(d - axis * (axis @ d)))
-    return {"object": f"{count} random", "joint": "both", "kind_right": right, "draws": count,
+    return {"object": f"{count} random", "joint": "both", "engine": "-", "kind_right": right, "draws": count,
             "axis_deg_max": float(max(angles)), "point_mm_max": float(max(points)), "selected": [],
             "prior_mass_covered": None}
 
@@ -122,11 +129,11 @@ def _row(name, obj, truth, found) -> dict:
 
 
 def _print(rows: list[dict]) -> None:
-    print(f"{'object':13} {'joint':9} {'kind ok':>7} {'axis deg':>8} {'point mm':>8}  "
+    print(f"{'object':13} {'joint':9} {'engine':7} {'kind ok':>7} {'axis deg':>8} {'point mm':>8}  "
           f"{'quantity':15} {'true':>10} {'|err| %':>8} {'max %':>7} {'CV %':>6} {'95% cover':>9}")
     for r in rows:
-        head = (f"{r['object']:13} {r['joint']:9} {r['kind_right']:>3}/{r['draws']:<3} {r['axis_deg_max']:8.3f} "
-                f"{r['point_mm_max']:8.2f}")
+        head = (f"{r['object']:13} {r['joint']:9} {r['engine']:7} {r['kind_right']:>3}/{r['draws']:<3} "
+                f"{r['axis_deg_max']:8.3f} {r['point_mm_max']:8.2f}")
         for q in ("mass", "axis_inertia", "gravity_moment", "friction"):
             if q in r:
                 v = r[q]
