@@ -148,12 +148,13 @@ class Bench:
     push-real: the MIT block pushes: friction per trial and its spread, quasi-static estimate, predictive validity.
     push-mit: the MIT pushing dataset's trials (mass known): friction per trial, spread, predictive validity.
     diagnose: --concealed recordings with a hidden effect of random size and --clean ones, shuffled: effect found?
+    furniture: drawers and doors scanned in their furniture from the front (three noise levels) against the truth.
     fuzz: seconds until a wrong SOURCE, OUT, material or topic is reported; then every reader fed --inputs
       seeded mutations of a valid file: outcomes counted, uncaught ones listed.
     """
 
     what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct",
-                                       "push", "push-real", "push-mit", "diagnose", "fuzz"]]
+                                       "push", "push-real", "push-mit", "diagnose", "fuzz", "furniture"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -180,7 +181,8 @@ class Bench:
     names: tuple[str, ...] = ()
     """reconstruct: objects to run, named as in its table (e.g. "Allen Key" "cube 30 cm"; default all)."""
     noise: tuple[str, ...] = ()
-    """reconstruct: depth-noise levels to run (low, high, sensor; default all), without the noise-free scans."""
+    """reconstruct, furniture: depth-noise levels to run (low, high, sensor; default all), without the
+    noise-free scans."""
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
     engine: Literal["newton", "mujoco", "both"] = "both"
@@ -425,6 +427,10 @@ def _dispatch(command) -> None:
                 bench_diagnose_push_synth(command.seeds)
             else:
                 bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases)
+        elif command.what == "furniture":
+            from twin.bench.furniture import bench_furniture
+
+            bench_furniture(command.noise)
         elif command.what == "fuzz":
             from twin.bench.fuzz import bench_fuzz
 
