@@ -86,7 +86,8 @@ class StageTimer:
 
     log: Callable[[str], None]
     seconds: dict = field(default_factory=dict)
-    live: bool = False
+    live: bool = field(default_factory=lambda: sys.stderr.isatty() and not os.environ.get("CI"))
+    """Show the spinner: on a terminal, never in a CI log."""
 
     def run(self, name: str, fn, *args, **kwargs):
         self.log(f"{name} ...")
@@ -110,18 +111,38 @@ def _spinner(name: str):
         yield
 
 
+def quiet_warp() -> None:
+    """Warp without its load and CUDA-driver chatter: a build's log is its stage lines, its errors one line each."""
+    import warp as wp
+
+    wp.config.quiet = True
+    wp.config.log_level = wp.LOG_WARNING  # no per-module load lines in the progress log
+    # Warp's native init prints a CUDA-driver notice straight to fd 2 on machines without a GPU: errors are
+    # one line each, so the notice is kept out (a GPU machine loses nothing, a failed init still raises)
+    saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    try:
+        sys.stderr.flush()
+        os.dup2(devnull, 2)
+        wp.init()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
 def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     """Run every stage and write config.output atomically; returns the output directory."""
     from twin.checks import check_build
 
     check_build(config)  # within the first second, before the heavy imports
+    quiet_warp()
     from assets import Pose
     from pipelines.decompose import DecomposeConfig, decompose
     from pipelines.identify.kind import detect_kind
     from pipelines.priors import VlmConfig, ask_vlm, describe_object, estimate_prior, scan_image
 
     t_start = time.perf_counter()
-    timer = StageTimer(log, live=sys.stderr.isatty() and not os.environ.get("CI"))
+    timer = StageTimer(log)
 
     # The inputs are read first: they are quick, and a bad file should fail before minutes of geometry.
     source = timer.run("scan" if Path(config.source).is_dir() else "mesh", _read_source, config)
@@ -323,7 +344,7 @@ def log_summary(doc: dict, log) -> None:
 def _replay_free(timer, mjcf_path, asset, recording, X_tracked_body, window_s, diagnosis, log) -> dict:
     """The exported MJCF replaying the evaluation recording in MuJoCo beside Newton's replay of the fit, and
     both against the sensors' noise alone: the best any model could do on this recording."""
-    from pipelines.replay import replay_held_mujoco
+    from pipelines.validate import replay_held_mujoco
 
     mujoco = timer.run("replay (MuJoCo)", replay_held_mujoco, mjcf_path, asset, recording, X_tracked_body, window_s)
     newton = asset.fit.final.rmse_position_m
@@ -507,7 +528,7 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
     if config.holdout:
         check_recording_path(config.holdout, "--holdout")
     asset = read_asset(out / "asset.json")
-    timer = StageTimer(log, live=sys.stderr.isatty() and not os.environ.get("CI"))
+    timer = StageTimer(log)
     provenance = asset.provenance
     # the recordings are read with the options the asset was built with (topics, frames, sensor rotation)
     built = provenance.get("config", {})

@@ -225,7 +225,6 @@ def _weighed(values: tuple[float, ...]) -> tuple[float, float] | None:
 
 def _run_build(args: Build) -> None:
     from twin.build import BuildConfig, build
-    from twin.checks import check_build
 
     config = BuildConfig(
         source=args.source, scans=args.scan, logs=args.logs, output=args.output, holdout=args.holdout, material=args.material,
@@ -237,8 +236,6 @@ def _run_build(args: Build) -> None:
         push_min_speed_m_s=args.push_min_speed, diagnose=args.diagnose, force=args.force,
         mesh_units=args.mesh_units, mass_kg=_weighed(args.mass),
     )
-    check_build(config)
-    _quiet_warp()
     build(config, log=_log)
 
 
@@ -377,27 +374,11 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _quiet_warp() -> None:
-    import warp as wp
-
-    wp.config.quiet = True
-    wp.config.log_level = wp.LOG_WARNING  # no per-module load lines in the progress log
-    # Warp's native init prints a CUDA-driver notice straight to fd 2 on machines without a GPU: errors are
-    # one line each, so the notice is kept out (a GPU machine loses nothing, a failed init still raises)
-    saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
-    try:
-        sys.stderr.flush()
-        os.dup2(devnull, 2)
-        wp.init()
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
-
-
 def _dispatch(command) -> None:
     if not isinstance(command, (Build, Inspect)):  # a build checks its inputs first and loads warp after
-        _quiet_warp()
+        from twin.build import quiet_warp
+
+        quiet_warp()
     if isinstance(command, Build):
         _run_build(command)
     elif isinstance(command, Inspect):
