@@ -32,7 +32,8 @@ class Build:
     """Output folder. twin's own files in it are replaced once the new build is complete; a folder holding
     files twin did not write is refused unless --force (they are never removed)."""
     force: bool = False
-    """Write into an existing folder that holds files twin did not write; they are kept as they are."""
+    """Write into an existing folder that holds files twin did not write; they are kept as they are (one that
+    bears a name twin would write stops the build before anything moves)."""
     material: str | None = None
     """What the object is made of, in words ("beech wood", "painted MDF", "aluminium"; matched to the library
     in assets/materials.json). Default: the scan's object.json hint, else unknown."""

@@ -5,7 +5,8 @@ later build into the same folder stages its files in a temporary folder beside i
 everything is written does it swap them in: the files of the previous manifest and those it is about
 to replace are set aside, the new ones moved in, and the set-aside ones removed last (or moved back if
 the swap fails). Files twin did not write are never touched. A folder that is neither empty nor a twin
-output is refused unless the user passes --force, which lets twin write beside what is there.
+output is refused unless the user passes --force, which lets twin write beside what is there; a file of
+the user's that bears one of the names twin would write stops the swap before anything moves.
 """
 
 from __future__ import annotations
@@ -122,6 +123,11 @@ def _swap_in(tmp: Path, out: Path, force: bool, made_by: str) -> None:
     previous = written_by_twin(out, made_by)
     if previous is None and any(out.iterdir()) and not force:  # something appeared since the check
         raise OutputError(f"{out}: folder now holds files twin did not write; nothing was changed")
+    clashes = [rel for rel in [*new, MANIFEST] if (out / rel).exists() or (out / rel).is_symlink()
+               if not _owned(rel, previous)]
+    if clashes:  # even --force never replaces a file of the user's that bears one of twin's names
+        raise OutputError(f"{out / clashes[0]}: exists and twin did not write it; nothing was changed "
+                          f"(move it, or choose another folder)")
     aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.twin-old-", dir=out.parent))
     moved: list[str] = []
     try:
@@ -145,6 +151,13 @@ def _swap_in(tmp: Path, out: Path, force: bool, made_by: str) -> None:
     finally:
         shutil.rmtree(aside, ignore_errors=True)
     _remove_empty_dirs(out, previous or ())
+
+
+def _owned(rel: str, previous: tuple[str, ...] | None) -> bool:
+    """Whether `rel` is (or lies in a folder that is) one of the files the previous output listed."""
+    if previous is None:
+        return False
+    return rel == MANIFEST or any(rel == p or rel.startswith(p.rstrip("/") + "/") for p in previous)
 
 
 def _inside(path: Path, root: Path) -> bool:

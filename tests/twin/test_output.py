@@ -142,3 +142,14 @@ def test_a_sample_made_by_synth_is_never_a_builds_output(tmp_path):
     assert written_by_twin(sample, "synth") == ("trial.mcap",) and written_by_twin(sample) is None
     with pytest.raises(OutputError, match="files twin did not write"):
         check_output(sample)
+
+
+def test_force_never_replaces_a_users_file_that_bears_one_of_twins_names(tmp_path):
+    out = _user_folder(tmp_path)
+    (out / "cube.urdf").write_text("the user's own robot")
+    with pytest.raises(OutputError, match="cube.urdf: exists and twin did not write it"):
+        with staged_output(out, force=True) as tmp:
+            _write_build(tmp)
+    assert (out / "cube.urdf").read_text() == "the user's own robot" and not (out / MANIFEST).exists()
+    assert sorted(p.name for p in out.iterdir()) == ["cube.urdf", "notes.txt", "sub"]
+    assert _siblings(tmp_path) == ["mine"]
