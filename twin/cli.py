@@ -464,5 +464,17 @@ def _dispatch(command) -> None:
                         from_vlm_starts=command.vlm_starts, engine=command.engine)
 
 
+def entry() -> None:
+    """The `twin` command. An interrupted run leaves at once with 130: its clean-up already ran while the
+    interrupt unwound, and the interpreter's own teardown after an interrupted native call (Open3D, Warp)
+    can end the process with 1 instead."""
+    code = main()
+    if code == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

@@ -13,7 +13,7 @@ SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "cube"
 
 
 def _start_build(out: Path) -> subprocess.Popen:
-    command = [sys.executable, "-c", "import sys; from twin.cli import main; sys.exit(main())", "build",
+    command = [sys.executable, "-m", "twin.cli", "build",
                str(SAMPLE / "scan"), "--logs", str(SAMPLE / "trial.mcap"), "-o", str(out), "--max-iterations", "2"]
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
