@@ -38,7 +38,8 @@ import numpy as np
 from assets import Asset
 from exporters.names import joint_name, mjcf_name, urdf_name, usd_prim_name
 
-__all__ = ["DEFAULT_TOLERANCE", "LOADERS", "LoaderCheck", "ValidationError", "ValidationReport", "replay_held_mujoco", "replay_pushed_mujoco",
+__all__ = ["DEFAULT_TOLERANCE", "LOADERS", "LoaderCheck", "ValidationError", "ValidationReport", "replay_held_mujoco", "replay_pushed_model",
+           "replay_pushed_mujoco",
            "validate_exports"]
 
 DEFAULT_TOLERANCE = 1e-6
@@ -868,29 +869,46 @@ def replay_pushed_mujoco(scene_path: Path, asset: Asset, recording, window_s: fl
     samples, per window "t_start_s", "final_position_error_m" and "final_heading_error_rad", and
     "windows", "window_s", "timestep_s".
     """
-    from dataclasses import replace
-
     import mujoco
     import trimesh
-    from scipy.spatial.transform import Rotation
 
-    from pipelines.identify.sliding import PlanarBody, SlidingConfig, estimate_force_bias, push_windows
+    from pipelines.identify.sliding import PlanarBody
 
     scene_path = Path(scene_path)
     model = mujoco.MjModel.from_xml_path(str(scene_path))
+    vertices = np.concatenate([trimesh.load(scene_path.parent / rel, force="mesh", process=False).vertices
+                               for rel in asset.geometry.collision])
+    inertial = asset.theta.inertial()
+    planar = PlanarBody(tuple(0.5 * (vertices.max(axis=0) - vertices.min(axis=0))), inertial.mass,
+                        float(inertial.inertia_matrix()[2, 2]))
+    return replay_pushed_model(model, mjcf_name(asset.name), planar, recording, window_s, config, where=scene_path)
+
+
+def replay_pushed_model(model, body_name: str, planar, recording, window_s: float = 0.5, config=None,
+                        where: Path | str = "model") -> dict:
+    """`replay_pushed_mujoco` on a compiled MuJoCo model whose body `body_name` sits on a free joint above a
+    support plane: the exported scene, or the model that made a synthetic recording (its truth), so both
+    replay the same windows the same way. planar: the `PlanarBody` the windows are cut for (its half
+    extents set how near the pusher counts as touching); the model's own time step is the replay's."""
+    from dataclasses import replace
+
+    import mujoco
+    from scipy.spatial.transform import Rotation
+
+    from pipelines.identify.sliding import SlidingConfig, estimate_force_bias, push_windows
+
     data = mujoco.MjData(model)
-    body, qadr, vadr = _mujoco_free_body(model, asset, scene_path)
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body_name)
+    joint = model.body_jntadr[body] if body >= 0 else -1
+    if body < 0 or model.body_jntnum[body] != 1 or model.jnt_type[joint] != mujoco.mjtJoint.mjJNT_FREE:
+        raise ValueError(f"{where}: no body {body_name!r} on a free joint")
+    qadr, vadr = int(model.jnt_qposadr[joint]), int(model.jnt_dofadr[joint])
     _settle(model, data, body, _REST_S)
     rest_z = float(data.qpos[qadr + 2])
     R_rest = _rotation_from_wxyz(data.qpos[qadr + 3:qadr + 7])
     tilt = Rotation.from_euler("z", -math.atan2(R_rest[1, 0], R_rest[0, 0])).as_matrix() @ R_rest
 
     config = replace(config or SlidingConfig(), window_s=window_s, dt_s=float(model.opt.timestep))
-    vertices = np.concatenate([trimesh.load(scene_path.parent / rel, force="mesh", process=False).vertices
-                               for rel in asset.geometry.collision])
-    inertial = asset.theta.inertial()
-    planar = PlanarBody(tuple(0.5 * (vertices.max(axis=0) - vertices.min(axis=0))), inertial.mass,
-                        float(inertial.inertia_matrix()[2, 2]))
     w = push_windows(recording, planar, config, estimate_force_bias(recording, config))
     model.opt.timestep = w.dt_s
     force, contact = w.window_force, w.contact
