@@ -34,12 +34,21 @@ GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
 
 @dataclass(frozen=True)
 class LeastSquaresResult:
-    """The estimate in the object frame and its covariance over (mass, com xyz, Ixx Iyy Izz Ixy Ixz Iyz)."""
+    """The estimate in the object frame and its covariance over (mass, com xyz, Ixx Iyy Izz Ixy Ixz Iyz).
+
+    pi [10]: the estimate as fitted (tracked frame, about its origin; may be unphysical); normal [10, 10]:
+    the weighted normal matrix H corrected for the tracker's noise; meat [10, 10]: the block sandwich's
+    meat, so that the covariance of pi is H^-1 M H^-1 (`pipelines.identify.posterior` reads the likelihood
+    from these).
+    """
 
     inertial: Inertial
     covariance: np.ndarray
     cutoff_hz: float
     sample_count: int
+    pi: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    meat: np.ndarray | None = None
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -185,16 +194,20 @@ def identify_least_squares(
         noise_Ab += dA.T @ db / noise_draws
 
     H = As.T @ As - noise_AA
-    pi = np.linalg.solve(H, As.T @ bs - noise_Ab)
+    try:
+        pi = np.linalg.solve(H, As.T @ bs - noise_Ab)
+    except np.linalg.LinAlgError:  # a motion that excites fewer than ten directions: the minimum-norm fit
+        pi = np.linalg.pinv(H) @ (As.T @ bs - noise_Ab)
     rows_per_block = 6 * max(1, int(round(block_s * rows.rate_hz)))
     scores = (As * (bs - As @ pi)[:, None])
     blocks = np.add.reduceat(scores, np.arange(0, len(bs), rows_per_block), axis=0)
     H_inv = np.linalg.pinv(H)
     B = len(blocks)
-    cov_pi = H_inv @ (blocks.T @ blocks * B / max(B - 10, 1)) @ H_inv
+    meat = blocks.T @ blocks * B / max(B - 10, 1)
+    cov_pi = H_inv @ meat @ H_inv
 
     inertial, J = object_frame_from_pi(pi, X_tracked_body)
-    return LeastSquaresResult(inertial, J @ cov_pi @ J.T, cutoff_hz, n)
+    return LeastSquaresResult(inertial, J @ cov_pi @ J.T, cutoff_hz, n, pi=pi, normal=H, meat=meat)
 
 
 def object_frame_from_pi(pi: np.ndarray, X_tracked_body: Pose) -> tuple[Inertial, np.ndarray]:

@@ -377,57 +377,7 @@ def _summary(rows: list[dict]) -> None:
               f"range {min(floors):.2f}-{max(floors):.2f}")
 
 
-WORKSHOP = Path(__file__).resolve().parents[3] / "shared" / "data" / "workshop-tools"
-WORKSHOP_TOOLS = ("Hammer", "Rubber Mallet", "Screwdriver", "Electronic Caliper", "Allen Key", "Adjustable Wrench")
-MIRROR = np.diag([1.0, 1.0, -1.0])
-"""The workshop-tools simulations obey F = m (a + g) with g pointing down, which is Newton's law with
-gravity pointing up. Mirroring world and body through z (pseudo-vectors: torque, angular velocity
-change sign too) turns them into recordings of our world, where gravity points down."""
-
-
-def workshop_recording(tool: str, directory: Path, rng: np.random.Generator, root: Path = WORKSHOP):
-    """One tool's simulated recording, mirrored (see MIRROR) and written as MCAP with the 'Low' noise of
-    the dataset's experiments; returns (recording, uniform-density prior, X_tracked_body, true COM shift
-    in the mirrored object frame [m])."""
-    import trimesh
-    import yaml
-    from scipy.spatial.transform import Rotation
-
-    from assets import Inertial, Pose
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
-    from pipelines.synth.recording import write_recording
-
-    folder = root / "data" / "Workshop Tools Dataset" / tool
-    npz = root / "derived" / "simulations_npz" / f"{tool.replace(' ', '_')}.npz"
-    if not npz.is_file() or not folder.is_dir():
-        raise FileNotFoundError(f"{npz}: workshop-tools data not found")
-    truth = yaml.safe_load((folder / "Inertia.yaml").read_text())["OBJECT"]
-    d = np.load(npz)
-    mesh = trimesh.load(folder / "mesh.ply", force="mesh")
-    mesh.apply_scale(1e-3)
-    mesh.apply_transform(np.block([[MIRROR, np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]))
-    mesh.density = truth["MASS"] / mesh.volume
-    uniform_com = np.asarray(mesh.center_mass)
-    true_com = MIRROR @ np.asarray(truth["COM_WRT_MESH"])
-    prior = Inertial(truth["MASS"], tuple(uniform_com),
-                     np.asarray(mesh.moment_inertia))  # about the uniform COM, mesh axes
-    grasp = np.asarray(truth["GRASP_WRT_MESH"])
-    X_tracked_body = np.linalg.inv(grasp)
-    X_tracked_body[:3, :3] = MIRROR @ X_tracked_body[:3, :3] @ MIRROR
-    X_tracked_body[:3, 3] = MIRROR @ X_tracked_body[:3, 3]
-
-    t = d["timestamp"]
-    T = d["ft_pose"]
-    R = MIRROR @ T[:, :3, :3] @ MIRROR
-    position = (T[:, :3, 3] @ MIRROR) + rng.normal(0, 2e-5, (len(t), 3))
-    quat = (Rotation.from_matrix(R) * Rotation.from_rotvec(rng.normal(0, 2e-4, (len(t), 3)))).as_quat()
-    force = d["ft_value"][:, :3] @ MIRROR + rng.normal(0, 0.05, (len(t), 3))
-    torque = -(d["ft_value"][:, 3:] @ MIRROR) + rng.normal(0, 0.0025, (len(t), 3))
-    path = directory / f"{tool.replace(' ', '_')}.mcap"
-    write_recording(path, pose=PoseTrack(t, position, quat, "world", "ft_sensor", "/tracker/pose"),
-                    wrench=WrenchTrack(t, force, torque, "/ft_sensor/wrench", "world"))
-    pose = Pose(tuple(X_tracked_body[:3, 3]), tuple(Rotation.from_matrix(X_tracked_body[:3, :3]).as_quat()))
-    return read_recording(path), prior, pose, true_com - uniform_com
+from twin.bench.workshop import MIRROR, WORKSHOP_TOOLS, workshop_recording  # noqa: E402
 
 
 def bench_diagnose_workshop(seed: int = 0) -> list[dict]:
