@@ -33,15 +33,21 @@ from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
 
-from pipelines.synth.jointed import passive_joint_force
+from pipelines.sim.joint import (
+    FRICTION_SMOOTHING,
+    GRAVITY_M_S2,
+    JOINT_EFFECT_SIZE,
+    add_jointed_part,
+    joint_dynamics,
+    joint_turns,
+    passive_joint_force,
+)
 
 from .kind import JointFit, joint_coordinates
 from .windows import lowpass
 
 __all__ = ["JOINT_EFFECT_PARAMS", "JointedConfig", "JointedIdentification", "equation_of_motion_rows",
            "identify_jointed", "joint_body", "joint_effect_columns", "joint_effort", "replay_jointed"]
-
-GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
 
 JOINT_EFFECT_PARAMS = {
     "viscous_damping": ("damping",),
@@ -51,7 +57,7 @@ JOINT_EFFECT_PARAMS = {
 """Passive joint forces the identification can add (DESIGN.md names) and their parameters: damping b
 [N s/m or N m s/rad]; stiffness k [N/m or N m/rad] and spring_force k q0 [N or N m]; stribeck, the
 breakaway excess f_s - f_c [N or N m], and stribeck_speed v_s [m/s or rad/s]. Their slots in the
-rollout's passive-force vector follow `pipelines.synth.jointed.JOINT_EFFECT_SIZE`."""
+rollout's passive-force vector follow `pipelines.sim.joint.JOINT_EFFECT_SIZE`."""
 POSITIVE_EFFECT_PARAMS = ("damping", "stiffness", "stribeck", "stribeck_speed")
 """Passive forces only: damping and stiffness dissipate or restore, breakaway friction exceeds sliding friction."""
 _EFFECT_SLOT = {"damping": 0, "stiffness": 1, "spring_force": 2, "stribeck": 3, "stribeck_speed": 4}
@@ -67,8 +73,9 @@ class JointedConfig:
     """Shooting-window length [s]."""
     substeps: int = 5
     """Featherstone steps per pose sample."""
-    friction_smoothing: float = 0.01
-    """eps of the joint friction model -f_c tanh(qd / eps) [m/s] or [rad/s]."""
+    friction_smoothing: float = FRICTION_SMOOTHING
+    """eps of the joint friction law f_c tanh(qd / eps) [m/s] or [rad/s], solved implicitly in the rollout
+    (`pipelines.sim.joint.joint_friction`): a force below f_c holds the part."""
     gravity_min_tilt_rad: float = 0.17
     """The gravity moment m d is identified only when the joint axis is tilted at least this much from vertical."""
     max_iterations: int = 100
@@ -197,17 +204,21 @@ def apply_window_effort_and_passive_forces(
     step: int,
     window_count: int,
     friction: wp.array[float],
-    smoothing: float,
     effect: wp.array2d[float],
+    dynamics: wp.array[wp.vec3],
+    turns: float,
+    dt: float,
+    smoothing: float,
     joint_q: wp.array[float],
     joint_qd: wp.array[float],
     joint_f: wp.array[float],
 ):
-    """Generalized force [N or N m] of world w: its window's measured effort plus the joint's passive forces
-    (Coulomb friction and the effects in `effect`, see `passive_joint_force`)."""
+    """Generalized force [N or N m] of world w: its window's measured effort, held over the step of dt [s], plus
+    the joint's passive forces (`pipelines.sim.joint.passive_joint_force`)."""
     w = wp.tid()
-    joint_f[w] = effort[step, w % window_count] + passive_joint_force(joint_q[w], joint_qd[w], friction[w],
-                                                                      smoothing, effect, w)
+    tau = effort[step, w % window_count]
+    joint_f[w] = tau + passive_joint_force(joint_q[w], joint_qd[w], tau, friction[w], effect, w, dynamics[w], turns,
+                                           dt, smoothing)
 
 
 class _Rollout:
@@ -217,9 +228,8 @@ class _Rollout:
                  smoothing: float, device: str = "cpu"):
         import newton
 
-        from pipelines.synth.jointed import JOINT_EFFECT_SIZE, add_jointed_part
-
         self.windows, self.V, self.device, self.smoothing = windows, variants, device, smoothing
+        self.joint, self.placement = joint, placement
         W = windows.q.shape[1]
         builder = newton.ModelBuilder(gravity=tuple(GRAVITY_M_S2))
         for _ in range(variants * W):
@@ -231,6 +241,7 @@ class _Rollout:
         self.effort = wp.array(windows.effort.astype(np.float32), dtype=float, device=device)
         self.friction = wp.zeros(variants * W, dtype=float, device=device)
         self.effect = wp.zeros((variants * W, JOINT_EFFECT_SIZE), dtype=float, device=device)
+        self.dynamics = wp.zeros(variants * W, dtype=wp.vec3, device=device)
 
     def run(self, inertials: list[Inertial], friction: np.ndarray, effect: np.ndarray, dq0: np.ndarray,
             dqd0: np.ndarray) -> np.ndarray:
@@ -252,6 +263,9 @@ class _Rollout:
         self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
         self.friction.assign(np.repeat(friction, W).astype(np.float32))
         self.effect.assign(np.repeat(effect, W, axis=0).astype(np.float32))
+        j, placement = self.joint, self.placement
+        self.dynamics.assign(np.repeat([joint_dynamics(j.type, j.axis, j.origin, placement, i) for i in inertials],
+                                       W, axis=0).astype(np.float32))
         s0, s1 = self.states
         s0.joint_q.assign((w.q_start[None, :] + dq0).reshape(-1).astype(np.float32))
         s0.joint_qd.assign((w.qd_start[None, :] + dqd0).reshape(-1).astype(np.float32))
@@ -261,8 +275,8 @@ class _Rollout:
         out[0] = s0.joint_q.numpy()
         for step in range(S * w.substeps):
             wp.launch(apply_window_effort_and_passive_forces, dim=self.V * W,
-                      inputs=[self.effort, step, W, self.friction, self.smoothing, self.effect, s0.joint_q,
-                              s0.joint_qd],
+                      inputs=[self.effort, step, W, self.friction, self.effect, self.dynamics,
+                              joint_turns(self.joint.type), w.dt_s, self.smoothing, s0.joint_q, s0.joint_qd],
                       outputs=[self.control.joint_f], device=self.device)
             self.solver.step(s0, s1, self.control, None, w.dt_s)
             s0, s1 = s1, s0

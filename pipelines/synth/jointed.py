@@ -6,10 +6,11 @@ with a computed-torque feedback controller that knows the part's true
 physics. The wrench it applies at the handle is the controller's joint effort
 turned into a handle force, plus a slowly varying push against the joint's
 constraint directions (which the joint absorbs, as a real hand's does). The
-handle frame is the tracked frame. Coulomb joint friction, -f_c tanh(qd / eps),
-and any concealed passive force (damping, spring, Stribeck breakaway) go in
-through `joint_f` (`apply_joint_effort_and_passive_forces`): Featherstone does
-not apply `joint_friction`.
+handle frame is the tracked frame. The joint friction (Coulomb, holding the
+part under a smaller force, see `pipelines.sim.joint`) and any concealed passive
+force (damping, spring, Stribeck breakaway) go in through `joint_f`
+(`apply_joint_effort_and_passive_forces`): Featherstone does not apply
+`joint_friction`.
 """
 
 from __future__ import annotations
@@ -21,6 +22,15 @@ import warp as wp
 from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
+
+from pipelines.sim.joint import (
+    FRICTION_SMOOTHING,
+    JOINT_EFFECT_SIZE,
+    add_jointed_part,
+    apply_joint_effort_and_passive_forces,
+    joint_dynamics,
+    joint_turns,
+)
 
 from .held import GRAVITY_M_S2, HeldMotion
 
@@ -121,8 +131,8 @@ class JointedMotionConfig:
     """Controller proportional gain (per unit of the joint's mass or inertia) [1/s^2]."""
     damping_1_s: float = 40.0
     """Controller derivative gain [1/s]."""
-    friction_smoothing: float = 0.01
-    """eps of the friction model -f_c tanh(qd / eps) [m/s] or [rad/s]."""
+    compensation_smoothing: float = 0.01
+    """eps [m/s or rad/s] of the controller's friction feedforward f_c tanh(qd / eps)."""
     constraint_force_n: float = 2.0
     """Peak push against the joint's constraint directions (no joint effort) [N]."""
     constraint_torque_nm: float = 0.1
@@ -136,38 +146,6 @@ class JointedMotion:
     held: HeldMotion
     q: np.ndarray
     qd: np.ndarray
-
-
-JOINT_EFFECT_SIZE = 5
-"""Passive joint forces beyond the Coulomb friction, per world: damping b [N s/m or N m s/rad], stiffness k
-[N/m or N m/rad], spring force k q0 [N or N m], Stribeck excess f_s - f_c [N or N m], Stribeck speed v_s
-[m/s or rad/s]."""
-
-
-@wp.func
-def passive_joint_force(q: float, qd: float, friction: float, smoothing: float, effect: wp.array2d[float],
-                        w: int) -> float:
-    """-(f_c + (f_s - f_c) exp(-(qd / v_s)^2)) tanh(qd / eps) - b qd - k (q - q0) [N or N m]."""
-    stribeck = float(0.0)
-    if effect[w, 3] != 0.0:
-        x = qd / effect[w, 4]
-        stribeck = effect[w, 3] * wp.exp(-x * x)
-    return -(friction + stribeck) * wp.tanh(qd / smoothing) - effect[w, 0] * qd - effect[w, 1] * q + effect[w, 2]
-
-
-@wp.kernel
-def apply_joint_effort_and_passive_forces(
-    joint_effort: wp.array[float],
-    joint_q: wp.array[float],
-    joint_qd: wp.array[float],
-    friction: wp.array[float],
-    smoothing: float,
-    effect: wp.array2d[float],
-    joint_f: wp.array[float],
-):
-    """Generalized force [N or N m] = commanded effort + the joint's passive forces, per world's one joint."""
-    w = wp.tid()
-    joint_f[w] = joint_effort[w] + passive_joint_force(joint_q[w], joint_qd[w], friction[w], smoothing, effect, w)
 
 
 def joint_effect_vector(effect, friction: float) -> np.ndarray:
@@ -189,30 +167,6 @@ def joint_effect_vector(effect, friction: float) -> np.ndarray:
     else:
         raise ValueError(f"{effect.name}: not an effect of a joint (viscous_damping, spring, stribeck_friction)")
     return out
-
-
-def add_jointed_part(builder, joint_type: str, axis, origin, placement: Pose, inertial: Inertial) -> int:
-    """Add the part as a body on a joint to the world, q = 0 at `placement`; returns the body index.
-
-    The joint frame sits at `origin` with world axes in the parent and the same
-    place in the body, so `axis` is a world direction at q = 0.
-    """
-    body = builder.add_link(
-        xform=wp.transform(wp.vec3(*placement.position), wp.quat(*placement.quaternion_xyzw)),
-        mass=inertial.mass, com=wp.vec3(*inertial.com),
-        inertia=wp.mat33(*np.asarray(inertial.inertia).reshape(-1)), lock_inertia=True,
-    )
-    X_joint_world = Pose(tuple(origin))
-    X_body_joint = placement.inverse() @ X_joint_world
-    kwargs = dict(
-        parent_xform=wp.transform(wp.vec3(*origin), wp.quat_identity()),
-        child_xform=wp.transform(wp.vec3(*X_body_joint.position), wp.quat(*X_body_joint.quaternion_xyzw)),
-        axis=wp.vec3(*axis),
-    )
-    add = builder.add_joint_prismatic if joint_type == "prismatic" else builder.add_joint_revolute
-    joint = add(-1, body, **kwargs)
-    builder.add_articulation([joint])
-    return body
 
 
 def _reference(obj: JointedObject, config: JointedMotionConfig, rng: np.random.Generator):
@@ -271,6 +225,8 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
     friction = wp.array([obj.friction], dtype=float, device=device)
     passive = wp.array(joint_effect_vector(effect, obj.friction)[None].astype(np.float32), dtype=float,
                        device=device)
+    dynamics = wp.array([joint_dynamics(obj.joint_type, axis, origin, placement, inertial)], dtype=wp.vec3,
+                        device=device)
 
     reference = _reference(obj, config, rng)
     constraint = _smooth_noise(rng, 6, config.duration_s)
@@ -288,7 +244,7 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
     body_q = np.zeros((n_sim, 7))
     q_log = np.zeros(n_sim)
     qd_log = np.zeros(n_sim)
-    kp, kd, eps = config.stiffness_1_s2, config.damping_1_s, config.friction_smoothing
+    kp, kd, eps = config.stiffness_1_s2, config.damping_1_s, config.compensation_smoothing
 
     for k in range(steps):
         X = state_a.body_q.numpy()[body].astype(float)
@@ -331,7 +287,8 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
             q_log[i] = state_a.joint_q.numpy()[0]
             qd_log[i] = state_a.joint_qd.numpy()[0]
             wp.launch(apply_joint_effort_and_passive_forces, dim=1,
-                      inputs=[effort, state_a.joint_q, state_a.joint_qd, friction, eps, passive],
+                      inputs=[effort, friction, passive, dynamics, joint_turns(obj.joint_type), sim_dt,
+                              FRICTION_SMOOTHING, state_a.joint_q, state_a.joint_qd],
                       outputs=[control.joint_f], device=device)
             solver.step(state_a, state_b, control, None, sim_dt)
             state_a, state_b = state_b, state_a

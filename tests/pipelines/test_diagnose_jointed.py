@@ -1,4 +1,4 @@
-"""Diagnose on a joint: the passive-force kernel's gradient, and a concealed joint effect found through Newton."""
+"""Diagnose on a joint: concealed joint effects found through Newton."""
 
 from __future__ import annotations
 
@@ -14,38 +14,6 @@ from twin.bench.diagnose import (
     record_joint_case,
     true_joint_model_fit,
 )
-
-
-def test_passive_joint_force_gradient_matches_central_difference():
-    """d(joint force)/d(Stribeck excess) from the tape equals the finite difference, -exp(-(qd/v_s)^2) tanh(qd/eps)."""
-    import warp as wp
-
-    from pipelines.synth.jointed import (
-        JOINT_EFFECT_SIZE,
-        apply_joint_effort_and_passive_forces,
-    )
-
-    q, qd, eps, v_s = 0.1, 0.02, 0.01, 0.03
-
-    def force(excess: float, tape: bool):
-        params = np.array([[0.4, 2.0, 0.1, excess, v_s]], np.float32)
-        assert params.shape[1] == JOINT_EFFECT_SIZE
-        effect = wp.array(params, dtype=float, requires_grad=True)
-        joint_f = wp.zeros(1, dtype=float, requires_grad=True)
-        t = wp.Tape()
-        with t:
-            wp.launch(apply_joint_effort_and_passive_forces, dim=1,
-                      inputs=[wp.array([0.5], dtype=float), wp.array([q], dtype=float), wp.array([qd], dtype=float),
-                              wp.array([1.5], dtype=float), eps, effect], outputs=[joint_f])
-        if tape:
-            t.backward(grads={joint_f: wp.array([1.0], dtype=float)})
-            return effect.grad.numpy()[0, 3]
-        return joint_f.numpy()[0]
-
-    h = 1e-2
-    numeric = (force(0.3 + h, False) - force(0.3 - h, False)) / (2 * h)
-    assert force(0.3, True) == pytest.approx(numeric, rel=1e-3)
-    assert numeric == pytest.approx(-np.exp(-(qd / v_s) ** 2) * np.tanh(qd / eps), rel=1e-3)
 
 
 def test_concealed_door_spring_named_and_quantified(tmp_path):
