@@ -132,6 +132,11 @@ class Synth:
     """Frame of the wrench messages: the sensor's, turning with the gripper, or world."""
     furniture: bool = False
     """With --object: scan the part as it stands in its furniture (a chest, a cabinet, an oven), from the front."""
+    pushed: bool = False
+    """Instead of a held --shape: a 10 x 10 x 1 cm, 0.75 kg block pushed twice across a table (mu 0.3),
+    written as block.obj (the mesh to build from), trial.mcap, heldout.mcap and truth.json; with
+    --engine mujoco, MuJoCo's contact and a PD-servoed pusher, the force in the sensor's axes (gripper) or
+    world's."""
 
 
 @dataclass(frozen=True)
@@ -187,7 +192,7 @@ class Bench:
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
     engine: Literal["newton", "mujoco", "both"] = "both"
-    """paper: the simulator that makes the recordings: twin's own Newton models (those identification fits),
+    """paper, push: the simulator that makes the recordings: twin's own Newton models (those identification fits),
     MuJoCo (a PD-servoed robot; it follows the same references only as closely as its servos do), or both,
     one row each; a target is met when it holds on every engine."""
     concealed: int = 40
@@ -270,6 +275,18 @@ def _run_synth(args: Synth) -> None:
     from twin.output import check_output, staged_output
 
     check_output(args.output, args.force, replace_own=False, made_by="synth")
+
+    if args.pushed:
+        from pipelines.synth.mujoco_push import PushedSampleConfig, make_pushed_sample
+        from pipelines.synth.push import PushConfig
+
+        frame = "sensor" if args.engine == "mujoco" and args.wrench_frame == "gripper" else "world"
+        _log(f"synthesising a pushed block into {args.output} ({args.engine}, force in {frame} axes)")
+        with staged_output(args.output, args.force, replace_own=False, made_by="synth") as tmp:
+            make_pushed_sample(tmp, PushedSampleConfig(push=PushConfig(seed=args.seed, offset_m=0.015)),
+                               engine=args.engine, wrench_frame=frame)
+        _log(f"wrote {args.output}")
+        return
 
     if args.object is not None:
         from pipelines.synth.held import SensorNoise
@@ -437,7 +454,7 @@ def _dispatch(command) -> None:
         elif command.what == "push":
             from twin.bench.push import bench_push
 
-            bench_push(command.seeds)
+            bench_push(command.seeds, engine=command.engine)
         elif command.what == "push-real":
             from twin.bench.push import bench_push_offsets, bench_push_real
 

@@ -32,79 +32,221 @@ def box_izz(mass_kg: float, half_extents_m) -> float:
     return mass_kg * ((2 * hx) ** 2 + (2 * hy) ** 2) / 12.0
 
 
-def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float = 0.5) -> list[dict]:
-    """Print and return one row per seed and mode: truth, estimate and errors.
+ENGINES = ("newton", "mujoco")
 
-    Modes: "m known" fits mu and I_zz with the true mass (objects of known mass, as
-    in the MIT dataset); "m free" fits mu, m and I_zz from a mass prior
-    `prior_mass_factor` x the truth (what pushes alone can tell); "slow" is "m known" on a second
-    recording of the same block pushed in one continuous stroke at 30 mm/s, where the quasi-static wrench
-    balance ("wb") applies (the strokes of the others stop the block within most windows).
-    """
+
+def push_case(seed: int):
+    """The push of one seed: its own mu, mass, push offset (so the block turns), start heading and sensor bias."""
+    from pipelines.synth.push import PushConfig
+
+    rng = np.random.default_rng(seed)
+    return PushConfig(
+        mu=float(rng.uniform(0.2, 0.6)), mass_kg=float(rng.uniform(0.4, 1.2)),
+        offset_m=float(rng.uniform(-0.025, 0.025)), yaw0_rad=float(rng.uniform(-0.3, 0.3)),
+        force_bias_n=tuple(rng.uniform(-0.5, 0.5, 3)), seed=seed,
+    )
+
+
+def _write(engine: str, path: Path, push, wrench_frame: str = "world"):
+    if engine == "mujoco":
+        from pipelines.synth.mujoco_push import write_pushed_mujoco
+
+        return write_pushed_mujoco(path, push, wrench_frame=wrench_frame)
+    from pipelines.synth.push import write_push
+
+    return write_push(path, push)
+
+
+def _identify_modes(engine: str, seed: int, tmp: Path, prior_mass_factor: float, mu_prior: float) -> list[dict]:
+    """The identification alone, three ways ("m known", "m free", "slow"; bench_push)."""
     from pipelines.identify.sliding import (
         PlanarBody, SlidingConfig, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
         wrench_balance_friction,
     )
     from pipelines.logs import read_recording
-    from pipelines.synth.push import PushConfig, write_push
 
     config = SlidingConfig()
+    push = push_case(seed)
+    recordings = {}
+    for name, variant in (("strokes", push), ("slow", replace(push, speed_m_s=0.03, stroke_s=5.0, push_s=2.9))):
+        path = tmp / f"push_{engine}_{seed}_{name}.mcap"
+        truth = _write(engine, path, variant)
+        recordings[name] = read_recording(path)
     rows = []
+    for mode, mass, free, rec in (
+            ("m known", truth.mass_kg, (True, False, True), recordings["strokes"]),
+            ("m free", truth.mass_kg * prior_mass_factor, (True, True, True), recordings["strokes"]),
+            ("slow", truth.mass_kg, (True, False, True), recordings["slow"])):
+        t0 = time.perf_counter()
+        body = PlanarBody(push.half_extents_m, mass, box_izz(mass, push.half_extents_m))
+        bias = estimate_force_bias(rec, config)
+        windows = push_windows(rec, body, config, bias)
+        fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=free)
+        balance = wrench_balance_friction(windows, body, config)
+        rows.append({
+            "engine": engine, "seed": seed, "mode": mode, "mu_true": truth.mu, "mu": float(fit.theta[0]),
+            "mu_err_pct": 100 * (fit.theta[0] / truth.mu - 1),
+            "mu_m_err_pct": 100 * (fit.theta[0] * fit.theta[1] / (truth.mu * truth.mass_kg) - 1),
+            "mass_err_pct": 100 * (fit.theta[1] / truth.mass_kg - 1),
+            "izz_err_pct": 100 * (fit.theta[2] / truth.izz_kgm2 - 1),
+            "determined": fit.determined, "turn_deg": net_yaw_deg(rec), "windows": fit.window_count,
+            "mu_qs_true_mass": quasi_static_friction(rec, body, config, bias, truth.mass_kg),
+            "bias_err_n": float(np.max(np.linalg.norm(bias.force_n - np.asarray(push.force_bias_n), axis=1))),
+            "rmse_mm": 1e3 * fit.rmse_position_m, "seconds": time.perf_counter() - t0,
+            "mu_wb_err_pct": 100 * (balance.mu / truth.mu - 1) if balance else float("nan"),
+            "wb_windows": len(balance.per_window) if balance else 0,
+        })
+    return rows
+
+
+def build_and_replay(engine: str, seed: int, tmp: Path, heldout_offset_m: float = -0.015) -> dict:
+    """`twin build` of one seed's push as a user runs it (the block's mesh, the trial, --holdout, the weighed
+    mass), then the held-out pushes replayed in MuJoCo by the exported scene.xml and by the truth model.
+
+    The truth model is the MuJoCo model of the push without its pusher (`pushed_block_xml`): for MuJoCo-made
+    recordings the model that made them, for Newton-made ones the true parameters on MuJoCo's contact.
+    Both replay the same windows the same way (`replay_pushed_model`); the ratio is the export's error over
+    the truth's.
+    """
+    import json
+
+    import mujoco
+
+    from pipelines.identify.sliding import PlanarBody
+    from pipelines.logs import read_recording
+    from pipelines.synth.mujoco_push import PushedSampleConfig, make_pushed_sample, push_settings, pushed_block_xml
+    from pipelines.synth.mujoco_push import PushContact
+    from pipelines.validate import replay_pushed_model
+    from twin.build import BuildConfig, build
+
+    push = push_case(seed)
+    sample = tmp / f"sample_{engine}_{seed}"
+    make_pushed_sample(sample, PushedSampleConfig(push=push, heldout_offset_m=heldout_offset_m), engine=engine)
+    t0 = time.perf_counter()
+    out = build(BuildConfig(source=sample / "block.obj", logs=(sample / "trial.mcap",), holdout=sample / "heldout.mcap",
+                            output=sample / "out", kind="sliding", material="steel",
+                            mass_kg=(push.mass_kg, 0.005 * push.mass_kg)), log=lambda _: None)
+    seconds = time.perf_counter() - t0
+    asset = json.loads((Path(out) / "asset.json").read_text())
+    exported = asset["provenance"]["heldout_replay"]["mujoco"]
+    model = mujoco.MjModel.from_xml_string(pushed_block_xml(push, push_settings(), PushContact(), pusher=False))
+    planar = PlanarBody(push.half_extents_m, push.mass_kg, box_izz(push.mass_kg, push.half_extents_m))
+    truth = replay_pushed_model(model, "block", planar, read_recording(sample / "heldout.mcap"), exported["window_s"])
+    theta = asset["theta"]
+    return {
+        "engine": engine, "seed": seed, "mu_true": push.mu, "mu": theta["friction"]["value"],
+        "mu_err_pct": 100 * (theta["friction"]["value"] / push.mu - 1),
+        "mass_source": theta["mass"]["source"], "mass_err_pct": 100 * (theta["mass"]["value"] / push.mass_kg - 1),
+        "izz_err_pct": 100 * (np.asarray(theta["inertia"]["value"])[2, 2] / box_izz(push.mass_kg, push.half_extents_m)
+                              - 1),
+        "effects": [e["name"] for e in asset["effects"]],
+        "export_mm": 1e3 * exported["rmse_position_m"], "truth_mm": 1e3 * truth["rmse_position_m"],
+        "ratio": exported["rmse_position_m"] / truth["rmse_position_m"],
+        "export_deg": float(np.degrees(exported["rmse_heading_rad"])),
+        "truth_deg": float(np.degrees(truth["rmse_heading_rad"])),
+        "heading_ratio": exported["rmse_heading_rad"] / truth["rmse_heading_rad"],
+        "windows": exported["windows"], "window_s": exported["window_s"], "seconds": seconds,
+    }
+
+
+def _bench_case(args) -> tuple[list[dict], dict]:
+    engine, seed, prior_mass_factor, mu_prior = args
+    from twin.build import quiet_warp
+
+    quiet_warp()
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(seeds):
-            rng = np.random.default_rng(seed)
-            push = PushConfig(
-                mu=float(rng.uniform(0.2, 0.6)), mass_kg=float(rng.uniform(0.4, 1.2)),
-                offset_m=float(rng.uniform(-0.025, 0.025)), yaw0_rad=float(rng.uniform(-0.3, 0.3)),
-                force_bias_n=tuple(rng.uniform(-0.5, 0.5, 3)), seed=seed,
-            )
-            recordings = {}
-            for name, variant in (("strokes", push), ("slow", replace(push, speed_m_s=0.03, stroke_s=5.0, push_s=2.9))):
-                path = Path(tmp) / f"push_{seed}_{name}.mcap"
-                truth = write_push(path, variant)
-                recordings[name] = read_recording(path)
-            for mode, mass, free, rec in (
-                    ("m known", truth.mass_kg, (True, False, True), recordings["strokes"]),
-                    ("m free", truth.mass_kg * prior_mass_factor, (True, True, True), recordings["strokes"]),
-                    ("slow", truth.mass_kg, (True, False, True), recordings["slow"])):
-                t0 = time.perf_counter()
-                body = PlanarBody(push.half_extents_m, mass, box_izz(mass, push.half_extents_m))
-                bias = estimate_force_bias(rec, config)
-                windows = push_windows(rec, body, config, bias)
-                fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=free)
-                balance = wrench_balance_friction(windows, body, config)
-                rows.append({
-                    "seed": seed, "mode": mode, "mu_true": truth.mu, "mu": float(fit.theta[0]),
-                    "mu_err_pct": 100 * (fit.theta[0] / truth.mu - 1),
-                    "mu_m_err_pct": 100 * (fit.theta[0] * fit.theta[1] / (truth.mu * truth.mass_kg) - 1),
-                    "mass_err_pct": 100 * (fit.theta[1] / truth.mass_kg - 1),
-                    "izz_err_pct": 100 * (fit.theta[2] / truth.izz_kgm2 - 1),
-                    "determined": fit.determined, "turn_deg": net_yaw_deg(rec), "windows": fit.window_count,
-                    "mu_qs_true_mass": quasi_static_friction(rec, body, config, bias, truth.mass_kg),
-                    "bias_err_n": float(np.max(np.linalg.norm(bias.force_n - np.asarray(push.force_bias_n), axis=1))),
-                    "rmse_mm": 1e3 * fit.rmse_position_m, "seconds": time.perf_counter() - t0,
-                    "mu_wb_err_pct": 100 * (balance.mu / truth.mu - 1) if balance else float("nan"),
-                    "wb_windows": len(balance.per_window) if balance else 0,
-                })
-    print(f"prior mu = {mu_prior}; 'm free' starts from a mass prior = truth x {prior_mass_factor}; "
-          f"'data' marks the parameters (mu, m, Izz) the pushes determined")
-    print(f"{'seed':>4} {'mode':7} {'mu true':>7} {'mu':>6} {'mu err %':>8} {'mu*m err %':>10} {'m err %':>7} "
-          f"{'Izz err %':>9} {'data':>4} {'turn deg':>8} {'win':>3} {'mu qs':>6} {'bias err N':>10} "
+        return (_identify_modes(engine, seed, Path(tmp), prior_mass_factor, mu_prior),
+                build_and_replay(engine, seed, Path(tmp)))
+
+
+def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float = 0.5, engine: str = "both",
+               workers: int = 1) -> dict:
+    """Print and return, per seed and engine, the identification's errors and the build's.
+
+    engine: "newton" (pipelines/synth/push.py, twin's own model), "mujoco" (pipelines/synth/mujoco_push.py:
+    MuJoCo's contact, a PD-servoed pusher, its force sensor) or "both", side by side; a target counts as met
+    only where it holds on every engine run.
+
+    Identification modes: "m known" fits mu and I_zz with the true mass (objects of known mass, as
+    in the MIT dataset); "m free" fits mu, m and I_zz from a mass prior
+    `prior_mass_factor` x the truth (what pushes alone can tell); "slow" is "m known" on a second
+    recording of the same block pushed in one continuous stroke at 30 mm/s, where the quasi-static wrench
+    balance ("wb") applies (the strokes of the others stop the block within most windows).
+
+    Build: `build_and_replay` (the user's `twin build` with a held-out push and the weighed mass): the
+    friction it reports, the effects its diagnosis reports on these clean pushes, and the exported scene's
+    MuJoCo replay of the held-out pushes against the truth model's. workers: seeds run in parallel processes.
+    """
+    if engine not in (*ENGINES, "both"):
+        raise ValueError(f"engine: expected newton, mujoco or both, got {engine!r}")
+    engines = ENGINES if engine == "both" else (engine,)
+    cases = [(e, seed, prior_mass_factor, mu_prior) for seed in range(seeds) for e in engines]
+    if workers > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            results = list(pool.map(_bench_case, cases))
+    else:
+        results = [_bench_case(c) for c in cases]
+    rows = [r for modes, _ in results for r in modes]
+    builds = [b for _, b in results]
+    _print_identification(rows, engines, seeds, prior_mass_factor, mu_prior)
+    _print_builds(builds, engines)
+    return {"identification": rows, "build": builds}
+
+
+def _print_identification(rows, engines, seeds, prior_mass_factor, mu_prior) -> None:
+    print(f"identification alone: prior mu = {mu_prior}; 'm free' starts from a mass prior = truth x "
+          f"{prior_mass_factor}; 'data' marks the parameters (mu, m, Izz) the pushes determined")
+    print(f"{'engine':6} {'seed':>4} {'mode':7} {'mu true':>7} {'mu':>6} {'mu err %':>8} {'mu*m err %':>10} "
+          f"{'m err %':>7} {'Izz err %':>9} {'data':>4} {'turn deg':>8} {'win':>3} {'mu qs':>6} {'bias err N':>10} "
           f"{'rmse mm':>7} {'wb err %':>8} {'st':>3} {'s':>5}")
     for r in rows:
         flags = "".join("y" if d else "n" for d in r["determined"])
-        print(f"{r['seed']:4d} {r['mode']:7} {r['mu_true']:7.3f} {r['mu']:6.3f} {r['mu_err_pct']:+8.2f} "
-              f"{r['mu_m_err_pct']:+10.2f} {r['mass_err_pct']:+7.2f} {r['izz_err_pct']:+9.2f} {flags:>4} "
-              f"{r['turn_deg']:8.1f} {r['windows']:3d} {r['mu_qs_true_mass']:6.3f} {r['bias_err_n']:10.3f} "
+        print(f"{r['engine']:6} {r['seed']:4d} {r['mode']:7} {r['mu_true']:7.3f} {r['mu']:6.3f} "
+              f"{r['mu_err_pct']:+8.2f} {r['mu_m_err_pct']:+10.2f} {r['mass_err_pct']:+7.2f} {r['izz_err_pct']:+9.2f} "
+              f"{flags:>4} {r['turn_deg']:8.1f} {r['windows']:3d} {r['mu_qs_true_mass']:6.3f} {r['bias_err_n']:10.3f} "
               f"{r['rmse_mm']:7.3f} {r['mu_wb_err_pct']:+8.2f} {r['wb_windows']:3d} {r['seconds']:5.1f}")
     print("wb: the quasi-static wrench balance over its 'st' steady windows (none: the strokes stop the block)")
-    for mode in ("m known", "m free", "slow"):
-        worst = max(abs(r["mu_err_pct"]) for r in rows if r["mode"] == mode)
-        worst_mm = max(abs(r["mu_m_err_pct"]) for r in rows if r["mode"] == mode)
-        wb = [abs(r["mu_wb_err_pct"]) for r in rows if r["mode"] == mode and r["wb_windows"]]
-        print(f"{mode}: worst |mu error| {worst:.2f} %, worst |mu*m error| {worst_mm:.2f} % over {seeds} seeds "
-              "(target: mu within 5 %)" + (f"; wrench balance worst {max(wb):.2f} % over {len(wb)}" if wb else ""))
-    return rows
+    for engine in engines:
+        for mode in ("m known", "m free", "slow"):
+            got = [r for r in rows if r["mode"] == mode and r["engine"] == engine]
+            worst = max(abs(r["mu_err_pct"]) for r in got)
+            worst_mm = max(abs(r["mu_m_err_pct"]) for r in got)
+            wb = [abs(r["mu_wb_err_pct"]) for r in got if r["wb_windows"]]
+            print(f"{engine} {mode}: worst |mu error| {worst:.2f} %, worst |mu*m error| {worst_mm:.2f} % over "
+                  f"{seeds} seeds (target: mu within 5 %)"
+                  + (f"; wrench balance worst {max(wb):.2f} % over {len(wb)}" if wb else ""))
+
+
+def _print_builds(builds, engines) -> None:
+    print("\nbuild (`twin build` with --holdout and the weighed mass): friction, effects reported on these clean "
+          "pushes, and the held-out pushes replayed in MuJoCo, position RMSE of the exported scene.xml against the "
+          "truth model's (the MuJoCo model that made the recording; for Newton-made ones the true parameters on "
+          "MuJoCo's contact)")
+    cells = ["mu err %", "Izz err %", "effects", "export mm", "truth mm", "ratio", "head ratio"]
+    width = [8, 9, 16, 9, 8, 6, 10]
+    print(f"{'seed':>4} " + " | ".join(" ".join(f"{c:>{w}}" for c, w in zip(cells, width)) for _ in engines))
+    print(f"{'':>4} " + " | ".join(f"{e:^{sum(width) + len(width) - 1}}" for e in engines))
+    for seed in sorted({b["seed"] for b in builds}):
+        parts = []
+        for engine in engines:
+            b = next(x for x in builds if x["seed"] == seed and x["engine"] == engine)
+            effects = ",".join(b["effects"]) or "none"
+            parts.append(f"{b['mu_err_pct']:+8.2f} {b['izz_err_pct']:+9.1f} {effects[:16]:>16} {b['export_mm']:9.3f} "
+                         f"{b['truth_mm']:8.3f} {b['ratio']:6.2f} {b['heading_ratio']:10.2f}")
+        print(f"{seed:4d} " + " | ".join(parts))
+    for engine in engines:
+        got = [b for b in builds if b["engine"] == engine]
+        mu_ok = max(abs(b["mu_err_pct"]) for b in got)
+        ratio = max(b["ratio"] for b in got)
+        clean = sum(not b["effects"] for b in got)
+        print(f"{engine}: worst |mu error| {mu_ok:.2f} % (target 5 %: {'met' if mu_ok <= 5 else 'MISSED'}); "
+              f"worst replay ratio {ratio:.2f} (target 1.5: {'met' if ratio <= 1.5 else 'MISSED'}); "
+              f"nothing reported on {clean}/{len(got)} clean pushes "
+              f"({'met' if clean == len(got) else 'MISSED'}); "
+              f"median build {np.median([b['seconds'] for b in got]):.0f} s")
 
 
 def net_yaw_deg(rec) -> float:
