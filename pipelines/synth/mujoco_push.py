@@ -70,9 +70,13 @@ def push_settings(**overrides) -> MujocoSettings:
 class PushContact:
     """MuJoCo's contact between the block and the table, and between the pusher and the block."""
 
-    shape: Literal["box", "mesh"] = "box"
+    shape: Literal["box", "mesh", "grid"] = "box"
     """The block's collision geom: a primitive box, or the same box as a convex mesh (MuJoCo's mesh-plane
-    collision then finds the support contacts)."""
+    collision then finds the support contacts: both put them at the bottom face's corners), or "grid": the
+    box touches only the pusher and `grid` x `grid` small spheres under its bottom face carry it, a
+    uniformly loaded face as the Newton engine models it."""
+    grid: int = 8
+    """Support points per side of the bottom face ("grid")."""
     condim: Literal[3, 4, 6] = 3
     """3: normal and isotropic sliding friction; 4: plus torsional friction; 6: plus rolling friction."""
     torsional_friction: float = 0.005
@@ -92,8 +96,8 @@ class PushContact:
     """Half length of the tip capsule's straight part [m]; it does not collide with the table."""
 
     def __post_init__(self):
-        if self.shape not in ("box", "mesh"):
-            raise ValueError(f"PushContact.shape: expected 'box' or 'mesh', got {self.shape!r}")
+        if self.shape not in ("box", "mesh", "grid"):
+            raise ValueError(f"PushContact.shape: expected 'box', 'mesh' or 'grid', got {self.shape!r}")
         if self.condim not in (3, 4, 6):
             raise ValueError(f"PushContact.condim: expected 3, 4 or 6, got {self.condim!r}")
         if self.cone not in ("elliptic", "pyramidal"):
@@ -153,10 +157,16 @@ def pushed_block_xml(config: PushConfig, settings: MujocoSettings, contact: Push
     surface = (f'friction="{friction}" condim="{contact.condim}" solref="{_num(contact.solref)}" '
                f'solimp="{_num(contact.solimp)}"')
     # contype/conaffinity bits: table 1, block 1|2, tip 2: the tip touches the block, never the table
+    assets = ""
     if contact.shape == "box":
         geom = f'<geom name="block" type="box" size="{_num((hx, hy, hz))}" density="0" {surface} contype="3" ' \
                f'conaffinity="3"/>'
-        assets = ""
+    elif contact.shape == "grid":
+        radius = 5e-4
+        cells = (np.arange(contact.grid) + 0.5) / contact.grid * 2.0 - 1.0
+        geom = f'<geom name="block" type="box" size="{_num((hx, hy, hz))}" density="0" contype="2" conaffinity="2"/>'
+        geom += "".join(f'<geom type="sphere" size="{radius!r}" pos="{_num((gx * hx, gy * hy, -hz + radius))}" '
+                        f'density="0" {surface} contype="1" conaffinity="1"/>' for gx in cells for gy in cells)
     else:
         geom = f'<geom name="block" type="mesh" mesh="block" density="0" {surface} contype="3" conaffinity="3"/>'
         assets = f"<asset>{_box_mesh_xml(config.half_extents_m)}</asset>"

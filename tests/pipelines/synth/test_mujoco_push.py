@@ -72,11 +72,13 @@ def test_truth_model_replays_its_own_recording(tmp_path):
 
 
 def test_mesh_block_and_torsional_contact_simulate(tmp_path):
-    """The block as a mesh geom with condim 4, under RK4: a finite push that moves the block; a time constant
-    under two steps is refused."""
+    """The block as a mesh geom with condim 4 under RK4, and on a grid of support spheres: finite pushes that
+    move the block; a time constant under two steps is refused."""
     config = PushConfig(push_s=0.6, idle_s=0.2, **QUIET)
-    data, _ = simulate_pushed_mujoco(config, push_settings(integrator="RK4"), PushContact(shape="mesh", condim=4))
-    assert np.all(np.isfinite(data["position"])) and data["position"][-1, 1] > 0.01
+    for settings, contact in ((push_settings(integrator="RK4"), PushContact(shape="mesh", condim=4)),
+                              (push_settings(), PushContact(shape="grid", grid=4))):
+        data, _ = simulate_pushed_mujoco(config, settings, contact)
+        assert np.all(np.isfinite(data["position"])) and data["position"][-1, 1] > 0.01
     with pytest.raises(ValueError, match="two steps"):
         simulate_pushed_mujoco(config, contact=PushContact(tip_solref=(0.001, 1.0)))
 
