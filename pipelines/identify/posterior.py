@@ -11,7 +11,7 @@ Prior. The geometry and material prior says the body is the mesh filled with mat
 density drawn from the material's distribution: a log-normal overall density scale e^u about
 the prior's (its spread from the bounds C). With parts (the convex parts of the decomposition,
 or any segmentation; each a pseudo-inertia per unit density), each part has its own density
-e^(u + delta_k), delta_k ~ N(0, part_log_sigma^2), and the part model's pseudo-inertia is linear
+e^(u + delta_k), delta_k ~ N(0, part_log_sigma^2) about their common scale, and the part model's pseudo-inertia is linear
 in the densities, as in the part-wise estimator of Nadeau, Giamou & Kelly (ICRA 2023). Whatever
 the part model leaves unexplained (inserts, a poor segmentation, scan error) is a spread of the
 body's 4x4 pseudo-inertia P about the part model's P_A: the affine-invariant log-map
@@ -50,8 +50,9 @@ class PosteriorConfig:
     """Spread of each of the 10 components of log(P_A^-1/2 P P_A^-1/2): how far the body's pseudo-inertia may
     stray from the (part-wise) uniform-density model. 0.25 lets a principal second moment or a COM offset of
     a quarter of the body's radius of gyration pass at one sigma."""
-    part_log_sigma: float = 0.8
-    """Spread of a part's log density about the body's (steel 7850 and rubber 1150 kg/m^3 differ by 1.9)."""
+    part_log_sigma: float = 1.5
+    """Spread of a part's log density about the body's: steel (7850 kg/m^3) on rubber (1150) or oak (700) differ
+    by 1.9-2.4, so a head and a handle are 1.3-1.6 sigma apart and the recordings' mass and COM decide."""
     mass_log_sigma: float | None = None
     """Spread of the log of the overall density scale; None: from the mass bounds, read as a 95 % range, and
     at least `mass_log_sigma_floor`."""
@@ -157,10 +158,12 @@ def pseudo_inertia_from_pi(pi: np.ndarray) -> np.ndarray:
 
 
 def _log_map(P: np.ndarray, whiten: np.ndarray) -> np.ndarray:
-    """The 10 independent components of log(W P W) (W = P_A^-1/2), off-diagonals times sqrt 2 so that their
-    squares sum to the squared Frobenius norm."""
+    """The 10 components of log(W P W) (W = P_A^-1/2) less its scale (the multiple of the identity: how heavy
+    the body is, which the density prior says), off-diagonals times sqrt 2 so that their squares sum to the
+    squared Frobenius norm."""
     e, V = np.linalg.eigh(whiten @ P @ whiten)
     L = (V * np.log(np.maximum(e, 1e-300))) @ V.T
+    L -= np.trace(L) / 4 * np.eye(4)
     iu = np.triu_indices(4)
     return L[iu] * np.where(iu[0] == iu[1], 1.0, np.sqrt(2.0))
 
@@ -211,19 +214,16 @@ def identify_posterior(
 
     P_prior = pseudo_inertia(prior.mass, prior.com, prior.inertia_matrix())
     if parts is None or len(parts) == 0:
-        part_P = (P_prior / prior.mass)[None]  # densities are then masses [kg]
+        part_P = (P_prior / prior.mass)[None]
         correction = np.zeros((4, 4))
-        volumes = np.ones(1)
-        free_parts = 0
     else:
         part_P = np.asarray(parts, dtype=float).reshape(-1, 4, 4)
-        volumes = part_P[:, 3, 3]
         # what the parts miss of the prior body at uniform density: equal densities give the prior exactly
-        correction = P_prior / prior.mass * volumes.sum() - part_P.sum(axis=0)
-        free_parts = len(part_P)
-    u0 = float(np.log(prior.mass / volumes.sum()))
+        correction = P_prior / prior.mass * part_P[:, 3, 3].sum() - part_P.sum(axis=0)
+    volumes = part_P[:, 3, 3]
+    free_parts = len(part_P) if len(part_P) > 1 else 0
     lo, hi = mass_bounds
-    sigma_u = config.mass_log_sigma or max(float(np.log(max(hi, lo * (1 + 1e-9)) / lo)) / (2 * Z95),
+    sigma_m = config.mass_log_sigma or max(float(np.log(max(hi, lo * (1 + 1e-9)) / lo)) / (2 * Z95),
                                            config.mass_log_sigma_floor)
     size = np.sqrt(max(np.trace(P_prior[:3, :3]) / prior.mass, 1e-18))
     scale4 = np.sqrt(prior.mass) * np.array([size, size, size, 1.0])
@@ -234,35 +234,30 @@ def identify_posterior(
         info = np.nan_to_num(term.information, nan=0.0, posinf=0.0, neginf=0.0)
         e, V = np.linalg.eigh(0.5 * (info + info.T))
         keep = e > max(e.max(), 0.0) * 1e-14
-        chol.append(((V[:, keep] * np.sqrt(e[keep])).T, np.nan_to_num(term.pi)))
+        chol.append(((V[:, keep] * np.sqrt(e[keep])).T, np.nan_to_num(term.pi, posinf=0.0, neginf=0.0)))
 
-    def part_model(u, delta):
-        rho = np.exp(u + delta)
-        mean_rho = float(rho @ volumes / volumes.sum())
-        P = np.einsum("k,kij->ij", rho, part_P) + mean_rho * correction
+    def part_model(delta):
+        """The part model's pseudo-inertia at relative densities e^delta (its scale is free) and the densities."""
+        rho = np.exp(delta)
+        P = np.einsum("k,kij->ij", rho, part_P) + float(rho @ volumes / volumes.sum()) * correction
         return _nearest_positive(P, scale4), rho
 
-    def split(x):
-        return x[:THETA_SIZE], x[THETA_SIZE], (x[THETA_SIZE + 1:] if free_parts else np.zeros(1))
-
     def residuals(x, which=("data", "prior")):
-        theta, u, delta = split(x)
+        theta, delta = x[:THETA_SIZE], x[THETA_SIZE:] if free_parts else np.zeros(1)
         P = pseudo_inertia_from_theta(theta)
         out = []
         if "data" in which:
             pi = pi_from_pseudo_inertia(T @ P @ T.T)
             out += [R @ (pi - centre) for R, centre in chol]
         if "prior" in which:
-            P_A, _ = part_model(u, delta)
-            out.append(_log_map(P, _inverse_sqrt(P_A)) / config.shape_sigma)
-            out.append(np.array([(u - u0) / sigma_u]))
+            out.append(_log_map(P, _inverse_sqrt(part_model(delta)[0])) / config.shape_sigma)
+            out.append(np.array([(2 * theta[0] - np.log(prior.mass)) / sigma_m]))  # log mass, density prior
             if free_parts:
                 out.append(delta / config.part_log_sigma)
         return np.concatenate(out)
 
     def start_vector(body: Inertial):
-        return np.concatenate([theta_from_physical(body.mass, body.com, body.inertia_matrix()),
-                               [float(np.log(body.mass / prior.mass)) + u0], np.zeros(free_parts)])
+        return np.concatenate([theta_from_physical(body.mass, body.com, body.inertia_matrix()), np.zeros(free_parts)])
 
     starts = {"prior": start_vector(prior)}
     for name, body in (extra_starts or {}).items():
@@ -273,26 +268,30 @@ def identify_posterior(
             continue  # a start that is not strictly physical is left out
 
     best, best_cost, messages, start_costs, evaluations = None, np.inf, [], {}, 0
+    best_name, best_x0 = "prior", starts["prior"]
     for name, x0 in starts.items():
-        cost0 = 0.5 * float(np.sum(residuals(x0) ** 2))
+        with np.errstate(all="ignore"):
+            cost0 = 0.5 * float(np.sum(residuals(x0) ** 2))
         try:
-            sol = least_squares(residuals, x0, method="trf", x_scale="jac", max_nfev=config.max_evaluations,
-                                xtol=1e-10, ftol=1e-10, gtol=1e-10)
+            with np.errstate(all="ignore"):
+                sol = least_squares(residuals, x0, method="trf", x_scale="jac", max_nfev=config.max_evaluations,
+                                    xtol=1e-10, ftol=1e-10, gtol=1e-10)
             x, cost, nfev, msg = sol.x, float(sol.cost), int(sol.nfev), sol.message
         except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
-            x, cost, nfev, msg = x0, cost0, 0, f"solver failed from {name}: {exc}"
+            x, cost, nfev, msg = x0, cost0, 0, f"the solver failed ({exc}); its start kept"
         if not np.all(np.isfinite(x)) or not np.isfinite(cost):
-            x, cost, msg = x0, cost0, f"solver left finite values from {name}; its start kept"
+            x, cost, msg = x0, cost0, "the solver reached non-finite values; its start kept"
         evaluations += nfev
         start_costs[name] = {"start": cost0, "end": cost}
-        messages.append(f"{name}: {msg}")
-        if cost < best_cost:
+        messages.append(f"from {name}: {msg}")
+        if best is None or cost < best_cost:
             best, best_cost, best_name, best_x0 = x, cost, name, x0
 
-    theta, u, delta = split(best)
-    covariance, data_share = _laplace(best, residuals, theta, free_parts)
+    theta = best[:THETA_SIZE]
+    covariance, data_share = _laplace(best, residuals, theta)
     m, c, I = _physical(theta)
-    _, rho = part_model(u, delta)
+    _, rho = part_model(best[THETA_SIZE:] if free_parts else np.zeros(1))
+    rho = rho * m / float(rho @ volumes)  # the densities that give the body's mass [kg/m^3; kg per unit without parts]
     dominated = tuple(n for n, s in zip(FLAT_NAMES, data_share) if s < config.prior_dominated_share)
     return PosteriorResult(
         inertial=Inertial(m, c, I), covariance=covariance, theta=theta, data_share=data_share,
@@ -308,7 +307,7 @@ def _physical(theta):
     return physical_from_theta(theta)
 
 
-def _laplace(x, residuals, theta, free_parts):
+def _laplace(x, residuals, theta):
     """Gauss-Newton covariance of the flat parameters at the MAP, and the data's share of each one's precision
     (1 - posterior variance / prior-only variance), by central differences."""
     n = len(x)
@@ -322,11 +321,21 @@ def _laplace(x, residuals, theta, free_parts):
             cols.append((residuals(x + e, which) - residuals(x - e, which)) / (2 * steps[k]))
         return np.stack(cols, axis=1)
 
-    J_all, J_prior = jac(("data", "prior")), jac(("prior",))
-    cov_all = np.linalg.pinv(J_all.T @ J_all)[:THETA_SIZE, :THETA_SIZE]
-    cov_prior = np.linalg.pinv(J_prior.T @ J_prior)[:THETA_SIZE, :THETA_SIZE]
+    with np.errstate(all="ignore"):
+        J_all, J_prior = jac(("data", "prior")), jac(("prior",))
+    J_all, J_prior = np.nan_to_num(J_all), np.nan_to_num(J_prior)
+    cov_all = _inverse_gram(J_all)[:THETA_SIZE, :THETA_SIZE]
+    cov_prior = _inverse_gram(J_prior)[:THETA_SIZE, :THETA_SIZE]
     G = physical_jacobian(theta)
     post = G @ cov_all @ G.T
     prior = G @ cov_prior @ G.T
     share = 1.0 - np.diag(post) / np.maximum(np.diag(prior), 1e-300)
     return 0.5 * (post + post.T), np.clip(share, 0.0, 1.0)
+
+
+def _inverse_gram(J: np.ndarray) -> np.ndarray:
+    """(J^T J)^-1 from the singular values of J itself (forming J^T J would square a condition number that
+    precise and vague evidence side by side easily take past 1e8), directions with none left out."""
+    _, sv, Vt = np.linalg.svd(J, full_matrices=False)
+    keep = sv > sv.max() * 1e-13 if sv.size else np.zeros(0, bool)
+    return (Vt[keep].T / sv[keep] ** 2) @ Vt[keep]
