@@ -9,7 +9,9 @@ and whether it belongs to the object (exported) or to the recording
 
 Regression conventions (tracked-frame axes, wrench about the tracked origin,
 measured = applied + what the effect adds to the robot's measured wrench):
-  sensor_bias:     + (force, torque)                     six constant columns
+  sensor_bias:     + (force, torque), constant in the wrench message's frame (DESIGN.md): six constant
+                   columns for a sensor turning with the tracked frame, the world's axes turned into the
+                   tracked frame's sample by sample for a message in world axes (`FramedRows`)
   time_delay:      measured(t) = applied(t - d) ~ applied(t) - d dw/dt
   viscous_damping: the robot also pushes against -b v_com and -b_angular omega
   quadratic_drag:  ... and against -c |v_com| v_com
@@ -19,7 +21,7 @@ uniform-density prior's, tested in `select`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Literal
 
 import numpy as np
@@ -58,8 +60,49 @@ def _com_velocity(rows: NewtonEulerRows, com_tracked: np.ndarray) -> np.ndarray:
     return rows.velocity + np.cross(rows.omega, com_tracked)
 
 
+@dataclass(frozen=True)
+class FramedRows(NewtonEulerRows):
+    """Rows whose wrench message was in axes fixed in the world: tracked_from_message [N, 3, 3] turns them
+    into the tracked frame's at each row (None: the message's axes turn with the tracked frame)."""
+
+    tracked_from_message: np.ndarray | None = None
+
+
+def framed_rows(rows: NewtonEulerRows, recording) -> NewtonEulerRows:
+    """`rows` of `recording`, told the wrench message's axes when they do not turn with the tracked frame (a
+    world-frame message): the tracked frame's orientation interpolated at each row."""
+    if recording.wrench_turns_with_pose:
+        return rows
+    from scipy.spatial.transform import Rotation, Slerp
+
+    p = recording.pose
+    R = Slerp(p.t_s, Rotation.from_quat(p.quat_xyzw))(np.clip(rows.t_s, p.t_s[0], p.t_s[-1]))
+    return FramedRows(**{f: getattr(rows, f) for f in rows.__dataclass_fields__},
+                      tracked_from_message=R.inv().as_matrix())
+
+
+def bias_in_tracked_axes(recording) -> bool:
+    """Whether a sensor_bias of `recording` is constant in the tracked frame's axes (its wrench message turns
+    with it) rather than in the world's."""
+    return bool(recording.wrench_turns_with_pose)
+
+
+def remove_bias(recording, force_n, torque_nm):
+    """`recording` with a bias constant in world axes taken off its wrench (world axes, torque about the tracked
+    origin): measured = applied + bias."""
+    w = recording.wrench
+    wrench = replace(w, force=w.force - np.asarray(force_n), torque=w.torque - np.asarray(torque_nm))
+    return replace(recording, wrench=wrench)
+
+
 def _bias_columns(rows, com_tracked):
-    return np.broadcast_to(np.eye(6), (len(rows.t_s), 6, 6))
+    R = getattr(rows, "tracked_from_message", None)
+    if R is None:
+        return np.broadcast_to(np.eye(6), (len(rows.t_s), 6, 6))
+    out = np.zeros((len(rows.t_s), 6, 6))
+    out[:, :3, :3] = R
+    out[:, 3:, 3:] = R
+    return out
 
 
 def _delay_columns(rows, com_tracked):
