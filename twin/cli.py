@@ -425,7 +425,8 @@ def _dispatch(command) -> None:
             elif command.push_synth:
                 bench_diagnose_push_synth(command.seeds)
             else:
-                bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases)
+                bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases,
+                               engine=command.engine)
         elif command.what == "furniture":
             from twin.bench.furniture import bench_furniture
 

@@ -315,11 +315,42 @@ def simulate_held_mujoco(
                       grasp_position_m=position, grasp_quat_xyzw=quat)
 
 
+@dataclass(frozen=True)
+class JointFrictionProfile:
+    """A joint friction the effect vocabulary has no name for, applied through MuJoCo's `frictionloss`
+    each step (its friction constraint then holds the part up to the force at rest, as real stiction does).
+
+    binding_friction {"q_range": [a, b], "extra": f}: the Coulomb friction rises by f [N or N m] while q is
+    in [a, b] (a stiff stretch of a drawer's runners); directional_friction {"sign": +1 or -1, "extra": f}:
+    it rises by f while the part moves along `sign` (q' sign > 0), a runner that catches one way.
+    """
+
+    name: str
+    params: dict
+
+    NAMES = ("binding_friction", "directional_friction")
+
+    def __post_init__(self):
+        if self.name not in self.NAMES:
+            raise ValueError(f"JointFrictionProfile.name: expected one of {self.NAMES}, got {self.name!r}")
+
+    def frictionloss(self, friction: float, q: float, qd: float, speed_scale: float) -> float:
+        """The joint's Coulomb friction [N or N m] at q, qd; `speed_scale` [m/s or rad/s] smooths the
+        direction change (a few thousandths of the travel per second)."""
+        p = self.params
+        if self.name == "binding_friction":
+            a, b = p["q_range"]
+            return friction + p["extra"] * float(a <= q <= b)
+        return friction + p["extra"] * 0.5 * (1.0 + np.tanh(p["sign"] * qd / speed_scale))
+
+
 def _joint_passive_xml(obj: JointedObject, effect: ConcealedEffect | None) -> str:
     """The part joint's MuJoCo attributes: Coulomb friction as `frictionloss`, and the effect's damping
     or spring (q = 0 at the scan, so `springref` is q0). Stribeck breakaway is set per step
     (`_stribeck_frictionloss`)."""
     attrs = f'frictionloss="{obj.friction!r}"'
+    if isinstance(effect, JointFrictionProfile):
+        return attrs
     if effect is None or effect.name == "stribeck_friction":
         if effect is not None and abs(effect.params["f_c"] - obj.friction) > 1e-12:
             raise ValueError(f"stribeck_friction f_c {effect.params['f_c']} must be the joint's Coulomb friction "
@@ -344,12 +375,13 @@ def simulate_jointed_mujoco(
     config: JointedMotionConfig,
     rng: np.random.Generator,
     settings: MujocoSettings = MujocoSettings(),
-    effect: ConcealedEffect | None = None,
+    effect: ConcealedEffect | JointFrictionProfile | None = None,
 ) -> JointedMotion:
     """Simulate a robot hand working a drawer or door in MuJoCo; returns what happened, noise-free.
 
     The part hangs on its MuJoCo joint (q = 0 at `obj.placement()`) with `frictionloss` = `obj.friction`;
-    effect (viscous_damping, spring, stribeck_friction) adds the joint's passive force in MuJoCo terms.
+    effect (viscous_damping, spring, stribeck_friction) adds the joint's passive force in MuJoCo terms;
+    a JointFrictionProfile (outside the vocabulary) sets the friction from q and qd each step.
     The hand, a servo body at the handle, carries a massless gripper welded (soft `weld` equality) to the
     handle; the F/T sensor sits on the gripper. The hand tracks the handle's pose along jointed.py's
     q reference, displaced off the joint's free direction by slowly varying offsets (the servo's spring
@@ -434,8 +466,16 @@ def simulate_jointed_mujoco(
     def stribeck():
         model.dof_frictionloss[dof] = _stribeck_frictionloss(effect, data.qvel[dof])
 
+    speed_scale = 2e-3 * (obj.travel[1] - obj.travel[0])
+
+    def profile():
+        model.dof_frictionloss[dof] = effect.frictionloss(obj.friction, data.qpos[q_adr], data.qvel[dof],
+                                                          speed_scale)
+
+    passive = (profile if isinstance(effect, JointFrictionProfile) else
+               stribeck if effect is not None and effect.name == "stribeck_friction" else None)
     wrench = _run(model, data, servo, reference, config.control_rate_hz, steps, settings.substeps, at_handle,
-                  record, stribeck if effect is not None and effect.name == "stribeck_friction" else None)
+                  record, passive)
     held = HeldMotion(t_wrench_s=(np.arange(steps) + 0.5) / config.control_rate_hz, force_n=wrench[:, :3],
                       torque_nm=wrench[:, 3:], t_s=np.arange(n_sim) * model.opt.timestep,
                       grasp_position_m=position, grasp_quat_xyzw=quat)

@@ -1,17 +1,11 @@
 """`twin bench diagnose`: recordings with a concealed effect (or none), shuffled; is the right one found?
 
-Each case is a held cube or sphere moved by the simulated robot (Newton), or
-RigPI's drawer, cabinet door or oven door worked on its joint (Featherstone),
-with one effect of a random magnitude hidden in the trial and held-out
-recordings alike, or none. The magnitude is drawn log-uniformly as a multiple
-("ratio") of the sensor's noise, from barely above it to large: per-sample
-force or torque for bias, damping and drag; 2 ms per unit for delay; a
-millimetre per unit for the COM shift. On a joint the unit is the per-sample
-joint effort noise sigma (the force noise, times the handle's lever on a
-hinge): damping b = ratio sigma / v, v = 0.8 travel/s a typical joint speed;
-spring k = ratio sigma / (travel / 4) about a rest position inside the travel;
-Stribeck excess f_s - f_c = 5 ratio sigma (it acts only near reversals), v_s
-5-20 % of v. The diagnosis is told nothing of it.
+The cases and their recordings are made in `twin.bench.diagnose_cases` (by twin's own Newton code or by
+MuJoCo, `--engine`); this module diagnoses each as a user's build would and prints one row per case: what
+was concealed and what was found, the main parameter's error, the held-out replay before and after, the
+truth model's own replay on the same recording, and the body's parameters after the diagnosis against the
+truth (mass, COM, and on a joint the quantity its motion determines: a drawer's mass, a door's moment
+about its hinge).
 
 Each row also replays the model that made the recordings (the true body and the concealed effect) on the
 held-out recording, as the diagnosis replays its own: the error that model leaves is the floor of the sensors'
@@ -24,218 +18,17 @@ from __future__ import annotations
 import base64
 import tempfile
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-EFFECTS = ("sensor_bias", "time_delay", "viscous_damping", "quadratic_drag", "nonuniform_density")
-JOINT_EFFECTS = ("viscous_damping", "spring", "stribeck_friction")
-FREE_OBJECTS = ("cube", "sphere")
-JOINT_OBJECTS = ("drawer", "cabinet_door", "oven_door")
-JOINT_DURATION_S = 8.0
-"""Length of each jointed recording [s]: after the 0.4 s hold and the 1 s fade-in, 6.6 s of motion in the
-0.3-1.2 Hz band, a few open/close cycles as a user would record them. In 4 s recordings (2.6 s of motion,
-one or two cycles) a spring or damping below about ratio 5 trades against the Coulomb friction and the
-mass: four of twelve came back 22-40 % off."""
-RATIO_RANGE = (0.5, 8.0)
-"""Effect size as a multiple of the per-sample sensor noise (see `concealed_effect`)."""
-SPEED_M_S = 0.15
-"""Typical speed of the COM in these motions [m/s], to turn a force ratio into damping and drag."""
-TURN_RAD_S = 2.0
-"""Typical angular speed [rad/s]."""
-
-
-@dataclass(frozen=True)
-class Case:
-    """One recording pair: object (a FREE_OBJECTS shape or a JOINT_OBJECTS part), concealed effect
-    (None: clean), its size ratio and seed."""
-
-    shape: str
-    effect: object
-    ratio: float
-    seed: int
-
-
-def concealed_effect(name: str, ratio: float, rng: np.random.Generator, noise):
-    """A ConcealedEffect of `name` whose size is `ratio` times the sensor's noise (see module docstring)."""
-    from pipelines.synth.held import ConcealedEffect
-
-    direction = rng.normal(size=3)
-    direction /= np.linalg.norm(direction)
-    other = rng.normal(size=3)
-    other /= np.linalg.norm(other)
-    if name == "sensor_bias":
-        return ConcealedEffect(name, {"force": (ratio * noise.force_sigma_n * direction).tolist(),
-                                      "torque": (ratio * noise.torque_sigma_nm * other).tolist()})
-    if name == "time_delay":
-        return ConcealedEffect(name, {"seconds": float(rng.choice([-1, 1]) * ratio * 2e-3)})
-    if name == "viscous_damping":
-        return ConcealedEffect(name, {"b": ratio * noise.force_sigma_n / SPEED_M_S,
-                                      "b_angular": ratio * noise.torque_sigma_nm / TURN_RAD_S})
-    if name == "quadratic_drag":
-        return ConcealedEffect(name, {"c": ratio * noise.force_sigma_n / SPEED_M_S**2})
-    if name == "nonuniform_density":
-        return ConcealedEffect(name, {"com_shift": (ratio * 1e-3 * direction).tolist()})
-    raise ValueError(f"{name}: not an effect of a held body ({', '.join(EFFECTS)}); joint effects need --object")
-
-
-def joint_effort_noise(obj, noise) -> float:
-    """Per-sample noise of the joint effort [N or N m]: the force noise, times the handle's lever on a hinge."""
-    if obj.joint_type == "prismatic":
-        return noise.force_sigma_n
-    handle = np.asarray(obj.position_m) + np.asarray(obj.handle_m) - np.asarray(obj.origin_m)
-    return noise.force_sigma_n * float(np.linalg.norm(np.cross(obj.axis, handle)))
-
-
-def concealed_joint_effect(name: str, ratio: float, rng: np.random.Generator, obj, noise):
-    """A ConcealedEffect of `name` on `obj`'s joint whose size is `ratio` times its effort noise (see module
-    docstring)."""
-    from pipelines.synth.held import ConcealedEffect
-
-    sigma = joint_effort_noise(obj, noise)
-    travel = obj.travel[1] - obj.travel[0]
-    speed = 0.8 * travel
-    if name == "viscous_damping":
-        return ConcealedEffect(name, {"b": ratio * sigma / speed})
-    if name == "spring":
-        return ConcealedEffect(name, {"k": ratio * sigma / (travel / 4), "q0": float(rng.uniform(*obj.travel))})
-    if name == "stribeck_friction":
-        return ConcealedEffect(name, {"f_s": obj.friction + 5 * ratio * sigma, "f_c": obj.friction,
-                                      "v_s": float(speed * np.exp(rng.uniform(np.log(0.05), np.log(0.2))))})
-    raise ValueError(f"{name}: not a joint effect ({', '.join(JOINT_EFFECTS)})")
-
-
-def make_cases(concealed: int, clean: int, seed: int) -> list[Case]:
-    """`concealed` cases cycling through every effect on free and jointed objects, `clean` without
-    (alternately free and jointed), shuffled."""
-    from pipelines.synth.held import SensorNoise
-    from pipelines.synth.jointed import jointed_paper_objects
-
-    parts = jointed_paper_objects()
-    kinds = [(name, False) for name in EFFECTS] + [(name, True) for name in JOINT_EFFECTS]
-    rng = np.random.default_rng(seed)
-    cases = []
-    for k in range(concealed):
-        name, jointed = kinds[k % len(kinds)]
-        lo, hi = (1.5, 10.0) if name == "nonuniform_density" else RATIO_RANGE
-        ratio = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
-        if jointed:
-            part = JOINT_OBJECTS[(k // len(kinds)) % len(JOINT_OBJECTS)]
-            effect = concealed_joint_effect(name, ratio, rng, parts[part], SensorNoise())
-        else:
-            part = FREE_OBJECTS[(k // len(kinds)) % len(FREE_OBJECTS)]
-            effect = concealed_effect(name, ratio, rng, SensorNoise())
-        cases.append(Case(part, effect, ratio, int(rng.integers(1 << 30))))
-    cases += [Case((FREE_OBJECTS[(k // 2) % 2] if k % 2 == 0 else JOINT_OBJECTS[(k // 2) % 3]), None, 0.0,
-                   int(rng.integers(1 << 30))) for k in range(clean)]
-    rng.shuffle(cases)
-    return cases
-
-
-def record_case(case: Case, directory: Path, duration_s: float):
-    """Simulate the case's trial and held-out recordings into `directory`; returns (trial, holdout, prior,
-    X_tracked_body) as `diagnose_held` takes them."""
-    import trimesh
-
-    from assets import Inertial, Pose
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
-    from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
-    from pipelines.synth.recording import write_recording
-
-    rng = np.random.default_rng(case.seed)
-    mass, mesh = ((0.02, trimesh.creation.box((0.04,) * 3)) if case.shape == "cube"
-                  else (0.05, trimesh.creation.icosphere(subdivisions=3, radius=0.025)))
-    mesh.density = mass / mesh.volume
-    uniform = Inertial(mass, (0.0, 0.0, 0.0), np.asarray(mesh.moment_inertia))
-    effect = case.effect
-    truth = uniform
-    if effect is not None and effect.name == "nonuniform_density":
-        truth = replace(uniform, com=tuple(effect.params["com_shift"]))
-    placement = Pose((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))
-    top = float(mesh.bounds[1, 2])
-    grasp = Pose((0.0, 0.0, top), (1.0, 0.0, 0.0, 0.0))
-    motion_config = HeldMotionConfig(duration_s=duration_s, substeps=4)
-    out = []
-    for name in ("trial", "heldout"):
-        motion = simulate_held(truth, placement, grasp, motion_config, rng, effect=effect)
-        t_pose, position, quat, t_wrench, force, torque = measure(motion, SensorNoise(), rng, effect=effect)
-        path = directory / f"{name}.mcap"
-        write_recording(path, pose=PoseTrack(t_pose, position, quat, "world", "gripper", "/tracker/pose"),
-                        wrench=WrenchTrack(t_wrench, force, torque, "/ft_sensor/wrench", "gripper"))
-        out.append(read_recording(path))
-    return out[0], out[1], uniform, grasp.inverse()
-
-
-def record_joint_case(case: Case, directory: Path, duration_s: float = JOINT_DURATION_S):
-    """Simulate the jointed case's trial and held-out recordings into `directory`; returns (trial, holdout,
-    joint, placement, prior) as `diagnose_jointed` takes them (the joint as `detect_kind` finds it)."""
-    from assets.materials import material_range
-    from pipelines.identify.kind import detect_kind
-    from pipelines.logs import read_recording
-    from pipelines.priors import uniform_density_prior
-    from pipelines.synth.held import SensorNoise
-    from pipelines.synth.jointed import (
-        JointedMotionConfig, jointed_paper_objects, simulate_jointed, write_jointed_recording,
-    )
-
-    obj = jointed_paper_objects()[case.shape]
-    rng = np.random.default_rng(case.seed)
-    out = []
-    for name in ("trial", "heldout"):
-        motion = simulate_jointed(obj, JointedMotionConfig(duration_s=duration_s), rng, effect=case.effect)
-        out.append(read_recording(write_jointed_recording(directory / f"{name}.mcap", obj, motion, SensorNoise(),
-                                                          rng)))
-    joint = detect_kind(out[0]).joint
-    prior = uniform_density_prior(obj.mesh(), material_range(None)).inertial
-    return out[0], out[1], joint, obj.placement(), prior
-
-
-def true_model_fit(case: Case, holdout, X_tracked_body, prior, window_s: float):
-    """Held-out replay of the model that made a free case's recordings (the true body and the concealed effect),
-    scored as the diagnosis scores its own models (`replay_held`, same windows and smoothing): the error no
-    model of these recordings is expected to beat, and what a found effect can at best reduce the base
-    model's error to."""
-    from pipelines.diagnose import replay_held
-    from pipelines.diagnose.effects import effect_vector
-
-    effect, truth, coefficients, delay_s = case.effect, prior, {}, 0.0
-    if effect is not None:
-        params = effect.params
-        if effect.name == "nonuniform_density":
-            truth = replace(prior, com=tuple(params["com_shift"]))
-        elif effect.name == "time_delay":
-            delay_s = params["seconds"]
-        elif effect.name == "sensor_bias":
-            coefficients = {"sensor_bias": np.concatenate([params["force"], params["torque"]])}
-        elif effect.name == "viscous_damping":
-            coefficients = {"viscous_damping": np.array([params["b"], params.get("b_angular", 0.0)])}
-        elif effect.name == "quadratic_drag":
-            coefficients = {"quadratic_drag": np.array([params["c"]])}
-    return replay_held(holdout, X_tracked_body, truth, effect_vector(coefficients), delay_s, window_s)[0]
-
-
-def true_joint_model_fit(case: Case, holdout, joint, placement, window_s: float):
-    """`true_model_fit` for a jointed case: the part's true body and friction (the joint body's prior values with
-    the truth as its prior) and its concealed passive force, on the joint `detect_kind` found, replayed as
-    `diagnose_jointed` replays."""
-    from pipelines.diagnose import replay_fit
-    from pipelines.identify.jointed import JointedConfig, joint_body, replay_jointed
-    from pipelines.synth.jointed import jointed_paper_objects
-
-    obj = jointed_paper_objects()[case.shape]
-    truth, effect = obj.inertial(), case.effect
-    config = JointedConfig(window_s=window_s)
-    body = joint_body(joint, placement, truth, config, (effect.name,) if effect is not None else ())
-    values = body.prior_values(obj.friction)
-    if effect is not None:
-        p = effect.params
-        sign = float(np.sign(joint.axis @ np.asarray(obj.axis)))  # q found along the true axis or against it
-        values[body.base_count:] = ([p["b"]] if effect.name == "viscous_damping" else  # JOINT_EFFECT_PARAMS' order
-                                    [p["k"], sign * p["k"] * p["q0"]] if effect.name == "spring" else
-                                    [p["f_s"] - p["f_c"], p["v_s"]])
-    _, q_sim, windows = replay_jointed(holdout, joint, placement, truth, body, values, config)
-    return replay_fit(joint, q_sim, windows)
+from twin.bench.diagnose_cases import (  # noqa: F401  (twin synth conceals with these)
+    EFFECTS, FREE_OBJECTS, JOINT_EFFECTS, JOINT_OBJECTS, OOV_EFFECTS, Case, case_kind, concealed_effect,
+    concealed_joint_effect, determined_quantity, joint_effort_noise, make_cases, make_mujoco_cases, overlaps,
+    record_case, record_joint_case, record_mujoco_case, record_mujoco_joint_case, record_push_case,
+    true_body, true_joint_model_fit, true_model_fit, true_state_range,
+)
 
 
 def truth_magnitude(effect) -> float:
@@ -275,84 +68,170 @@ def main_std(effect) -> float | None:
     return None
 
 
-def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0, seed: int = 0,
-                   bootstraps: int = 40, cases: tuple[int, ...] = ()) -> list[dict]:
-    """Run every case (or only the indices `cases` of the shuffled list, the same recordings as in the full
-    run), print the table and the summary; returns the rows."""
-    from pipelines.diagnose import DiagnoseConfig, diagnose_held, diagnose_jointed
+def _diagnose_case(case: Case, duration_s: float, config) -> dict:
+    """Record `case`, diagnose it as a build would, and score what came out (one table row, less its index)."""
+    from pipelines.diagnose import diagnose_held, diagnose_jointed, diagnose_pushed
+    from pipelines.identify.sliding import SlidingConfig
 
-    rows = []
-    header = (f"{'#':>3} {'object':<12} {'concealed':<18} {'ratio':>6} {'found (top-1)':<18} {'main err %':>10} "
-              f"{'std %':>6} {'rmse before mm':>14} {'after mm':>9} {'truth mm':>9} {'floor mm':>9} {'s':>5}")
+    kind = case_kind(case)
+    mujoco = case.engine == "mujoco"
+    joint = refit = None
+    with tempfile.TemporaryDirectory() as tmp:
+        if kind == "joint":
+            record = record_mujoco_joint_case if mujoco else record_joint_case
+            trial, holdout, joint, placement, prior = record(case, Path(tmp))
+            diagnosis, _ = diagnose_jointed([trial], holdout, joint, placement, prior, config=config)
+            oov = case.effect is not None and case.effect.name in OOV_EFFECTS
+            true_fit = (true_joint_model_fit(replace(case, effect=None) if oov else case, holdout, joint, placement,
+                                             config.joint_window_s))
+        elif kind == "push":
+            trial, holdout, body, mu_prior = record_push_case(case, Path(tmp))
+            diagnosis, refit = diagnose_pushed([trial], [holdout], body, mu_prior, SlidingConfig(), config)
+            true_fit = None
+        else:
+            record = record_mujoco_case if mujoco else record_case
+            trial, holdout, prior, X_tracked_body = record(case, Path(tmp), duration_s)
+            diagnosis = diagnose_held([trial], holdout, X_tracked_body, prior, config)
+            true_fit = true_model_fit(case, holdout, X_tracked_body, prior, config.window_s)
+    top = diagnosis.effects[0] if diagnosis.effects else None
+    truth = case.effect.name if case.effect else None
+    error = std = None
+    if top is not None and case.effect is not None and top.name == truth and truth not in OOV_EFFECTS:
+        # a delay of the wrong sign counts as an error of more than 100 %
+        found = (top.params["seconds"] * np.sign(case.effect.params["seconds"]) if truth == "time_delay"
+                 else truth_magnitude(replace(case.effect, params=top.params)))
+        error = 100 * abs(found - truth_magnitude(case.effect)) / truth_magnitude(case.effect)
+        vector = {"sensor_bias": "force", "nonuniform_density": "com_shift"}.get(truth)
+        if vector is not None:  # a vector by its difference, so a wrong direction or frame counts
+            error = 100 * float(np.linalg.norm(np.subtract(top.params[vector], case.effect.params[vector]))
+                                / np.linalg.norm(case.effect.params[vector]))
+        reported = main_std(top)
+        std = None if reported is None else 100 * reported / truth_magnitude(case.effect)
+    row = {"engine": case.engine, "frame": case.wrench_frame, "object": case.shape, "kind": kind,
+           "concealed": truth, "ratio": case.ratio, "found": top.name if top else None,
+           "all_found": [e.name for e in diagnosis.effects], "main_error_pct": error, "main_std_pct": std,
+           "rmse_before_m": diagnosis.fits["before"].rmse_position_m,
+           "rmse_after_m": diagnosis.fits["after"].rmse_position_m,
+           "rmse_true_m": None if true_fit is None else true_fit.rmse_position_m,
+           "floor_m": diagnosis.noise_floor["rmse_position_m"] if diagnosis.noise_floor else None,
+           "unexplained": [dict(u) for u in diagnosis.unexplained], "doubtful": list(diagnosis.doubtful),
+           "mass_pct": None, "com_mm": None, "determined_pct": None, "oov_overlap": None}
+    after = diagnosis.inertial.get("after") if diagnosis.inertial else None
+    if kind in ("free", "joint") and after is not None:
+        body = true_body(case)
+        row["mass_pct"] = 100 * (after.mass - body.mass) / body.mass
+        row["com_mm"] = 1000 * float(np.linalg.norm(np.asarray(after.com) - np.asarray(body.com)))
+        if kind == "joint":
+            d_true = determined_quantity(case, body)
+            row["determined_pct"] = 100 * (determined_quantity(case, after) - d_true) / d_true
+        else:  # the inertia about the COM, relative Frobenius error
+            row["determined_pct"] = 100 * float(np.linalg.norm(after.inertia_matrix() - body.inertia_matrix())
+                                                / np.linalg.norm(body.inertia_matrix()))
+    elif kind == "push" and refit is not None:
+        row["determined_pct"] = 100 * (float(refit.theta[0]) - 0.3) / 0.3  # mu
+    if kind == "joint" and truth in OOV_EFFECTS:
+        where = true_state_range(case, joint)
+        row["oov_truth"] = where
+        row["oov_overlap"] = any(overlaps(u.get("where", {}), where) for u in diagnosis.unexplained)
+    return row
+
+
+def _fmt(value, spec: str, width: int) -> str:
+    return f"{'' if value is None else format(value, spec):>{width}}"
+
+
+def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0, seed: int = 0,
+                   bootstraps: int = 40, cases: tuple[int, ...] = (), engine: str = "newton") -> list[dict]:
+    """Run every case (or only the indices `cases` of each engine's shuffled list, the same recordings as in the
+    full run) on recordings made by `engine` ("newton", "mujoco" or "both"), print the table and the summary
+    per engine; returns the rows."""
+    from pipelines.diagnose import DiagnoseConfig
+
+    if engine not in ("newton", "mujoco", "both"):
+        raise ValueError(f"bench diagnose --engine: expected newton, mujoco or both, got {engine!r}")
+    engines = ("newton", "mujoco") if engine == "both" else (engine,)
+    header = (f"{'#':>3} {'engine':<6} {'frame':<7} {'object':<12} {'concealed':<20} {'ratio':>6} "
+              f"{'found (top-1)':<20} {'main err %':>10} {'std %':>6} {'rmse before mm':>14} {'after mm':>9} "
+              f"{'truth mm':>9} {'floor mm':>9} {'mass %':>7} {'COM mm':>7} {'det %':>7} {'unexpl':>6} {'s':>5}")
     print(header)
     print("-" * len(header))
-    for k, case in enumerate(make_cases(concealed, clean, seed)):
-        if cases and k not in cases:
-            continue
-        t0 = time.perf_counter()
-        config = DiagnoseConfig(bootstraps=bootstraps, seed=case.seed)
-        with tempfile.TemporaryDirectory() as tmp:
-            if case.shape in JOINT_OBJECTS:
-                trial, holdout, joint, placement, prior = record_joint_case(case, Path(tmp))
-                diagnosis, _ = diagnose_jointed([trial], holdout, joint, placement, prior, config=config)
-                true_fit = true_joint_model_fit(case, holdout, joint, placement, config.joint_window_s)
-            else:
-                trial, holdout, prior, X_tracked_body = record_case(case, Path(tmp), duration_s)
-                diagnosis = diagnose_held([trial], holdout, X_tracked_body, prior, config)
-                true_fit = true_model_fit(case, holdout, X_tracked_body, prior, config.window_s)
-        top = diagnosis.effects[0] if diagnosis.effects else None
-        truth = case.effect.name if case.effect else None
-        error = std = None
-        if top is not None and case.effect is not None and top.name == truth:
-            # a delay of the wrong sign counts as an error of more than 100 %
-            found = (top.params["seconds"] * np.sign(case.effect.params["seconds"]) if truth == "time_delay"
-                     else truth_magnitude(replace(case.effect, params=top.params)))
-            error = 100 * abs(found - truth_magnitude(case.effect)) / truth_magnitude(case.effect)
-            reported = main_std(top)
-            std = None if reported is None else 100 * reported / truth_magnitude(case.effect)
-        row = {"object": case.shape, "concealed": truth, "ratio": case.ratio, "found": top.name if top else None,
-               "all_found": [e.name for e in diagnosis.effects], "main_error_pct": error, "main_std_pct": std,
-               "rmse_before_m": diagnosis.fits["before"].rmse_position_m,
-               "rmse_after_m": diagnosis.fits["after"].rmse_position_m, "rmse_true_m": true_fit.rmse_position_m,
-               "floor_m": diagnosis.noise_floor["rmse_position_m"] if diagnosis.noise_floor else None,
-               "seconds": time.perf_counter() - t0}
-        rows.append(row)
-        floor = '' if row['floor_m'] is None else f"{1000 * row['floor_m']:.3f}"
-        print(f"{k:>3} {case.shape:<12} {truth or 'none':<18} {case.ratio:>6.2f} {row['found'] or 'none':<18} "
-              f"{'' if error is None else f'{error:.1f}':>10} {'' if std is None else f'{std:.1f}':>6} "
-              f"{1000 * row['rmse_before_m']:>14.3f} "
-              f"{1000 * row['rmse_after_m']:>9.3f} {1000 * row['rmse_true_m']:>9.3f} {floor:>9} "
-              f"{row['seconds']:>5.1f}",
-              flush=True)
-    _summary(rows)
+    rows = []
+    for name in engines:
+        made = make_cases(concealed, clean, seed) if name == "newton" else make_mujoco_cases(concealed, clean, seed)
+        for k, case in enumerate(made):
+            if cases and k not in cases:
+                continue
+            t0 = time.perf_counter()
+            row = _diagnose_case(case, duration_s, DiagnoseConfig(bootstraps=bootstraps, seed=case.seed))
+            row.update(index=k, seconds=time.perf_counter() - t0)
+            rows.append(row)
+            mm = lambda v: None if v is None else 1000 * v  # noqa: E731
+            unexplained = (("hit" if row["oov_overlap"] else "miss") if row["oov_overlap"] is not None
+                           else str(len(row["unexplained"])))
+            print(f"{k:>3} {name:<6} {case.wrench_frame:<7} {case.shape:<12} {row['concealed'] or 'none':<20} "
+                  f"{case.ratio:>6.2f} {row['found'] or 'none':<20} {_fmt(row['main_error_pct'], '.1f', 10)} "
+                  f"{_fmt(row['main_std_pct'], '.1f', 6)} {_fmt(mm(row['rmse_before_m']), '.3f', 14)} "
+                  f"{_fmt(mm(row['rmse_after_m']), '.3f', 9)} {_fmt(mm(row['rmse_true_m']), '.3f', 9)} "
+                  f"{_fmt(mm(row['floor_m']), '.3f', 9)} {_fmt(row['mass_pct'], '+.1f', 7)} "
+                  f"{_fmt(row['com_mm'], '.2f', 7)} {_fmt(row['determined_pct'], '+.1f', 7)} {unexplained:>6} "
+                  f"{row['seconds']:>5.1f}", flush=True)
+            for u in row["unexplained"]:
+                print(f"      unexplained: {u['summary']}")
+            if row["doubtful"]:
+                print(f"      doubtful: {', '.join(row['doubtful'])}")
+    for name in engines:
+        print(f"\n== {name} ==")
+        _summary([r for r in rows if r["engine"] == name])
     return rows
 
 
 def _summary(rows: list[dict]) -> None:
-    concealed = [r for r in rows if r["concealed"]]
+    concealed = [r for r in rows if r["concealed"] and r["concealed"] not in OOV_EFFECTS]
+    oov = [r for r in rows if r["concealed"] in OOV_EFFECTS]
     clean = [r for r in rows if not r["concealed"]]
     right = [r for r in concealed if r["found"] == r["concealed"]]
     within = [r for r in right if r["main_error_pct"] is not None and r["main_error_pct"] <= 15]
-    reported = [r for r in rows if r["found"]]
+    reported = [r for r in rows if r["found"] and r["rmse_true_m"] is not None]
     halved = [r for r in reported if r["rmse_after_m"] <= 0.5 * r["rmse_before_m"]]
-    print()
     print(f"top-1 right: {len(right)}/{len(concealed)} concealed ({100 * len(right) / max(len(concealed), 1):.0f} %)")
-    for where, objects, names in (("free", FREE_OBJECTS, EFFECTS), ("joint", JOINT_OBJECTS, JOINT_EFFECTS)):
-        for name in names:
-            of = [r for r in concealed if r["concealed"] == name and r["object"] in objects]
+    for kind in ("free", "joint", "push"):
+        for name in sorted({r["concealed"] for r in concealed if r["kind"] == kind}):
+            of = [r for r in concealed if r["concealed"] == name and r["kind"] == kind]
             ok = [r for r in of if r["found"] == name]
-            errs = [r["main_error_pct"] for r in ok]
-            print(f"  {where:<5} {name:<18} {len(ok)}/{len(of)} right, main parameter error median "
+            errs = [r["main_error_pct"] for r in ok if r["main_error_pct"] is not None]
+            frames = ", ".join(f"{f} {sum(r['found'] == name for r in of if r['frame'] == f)}/"
+                               f"{sum(r['frame'] == f for r in of)}" for f in sorted({r['frame'] for r in of}))
+            print(f"  {kind:<5} {name:<18} {len(ok)}/{len(of)} right ({frames}), main parameter error median "
                   f"{np.median(errs) if errs else float('nan'):.1f} %, max {max(errs) if errs else float('nan'):.1f} %")
-    for where, objects in (("free", FREE_OBJECTS), ("joint", JOINT_OBJECTS)):
-        of = [r for r in clean if r["object"] in objects]
-        print(f"nothing reported on clean ({where}): {len(of) - sum(bool(r['found']) for r in of)}/{len(of)}")
-    print(f"nothing reported on clean: {len(clean) - sum(bool(r['found']) for r in clean)}/{len(clean)}")
+    for kind in ("free", "joint", "push"):
+        of = [r for r in clean if r["kind"] == kind]
+        if of:
+            print(f"nothing reported on clean ({kind}): {sum(not r['found'] for r in of)}/{len(of)} no effect, "
+                  f"{sum(not r['found'] and not r['unexplained'] for r in of)}/{len(of)} no effect and no unexplained")
+    print(f"nothing reported on clean: {sum(not r['found'] for r in clean)}/{len(clean)} no effect; "
+          f"{sum(not r['found'] and not r['unexplained'] for r in clean)}/{len(clean)} no effect and no unexplained")
+    if oov:
+        hit = [r for r in oov if r["oov_overlap"]]
+        print(f"out of vocabulary: an unexplained entry overlapping the true range in {len(hit)}/{len(oov)}; "
+              f"an effect named anyway in {sum(bool(r['found']) for r in oov)}/{len(oov)}; "
+              f"parameters flagged doubtful in {sum(bool(r['doubtful']) for r in oov)}/{len(oov)}")
     print(f"main parameter within 15 %: {len(within)}/{len(right)} of the right ones")
     covered = [r for r in right if r["main_std_pct"] and r["main_error_pct"] <= 2 * r["main_std_pct"]]
     print(f"main parameter within 2 reported standard deviations: {len(covered)}/{len(right)} of the right ones")
+    # the body after the diagnosis: mass within 3 %, the determined quantity (joint: drawer mass, door moment
+    # about the hinge; free: the inertia, Frobenius) within 5 %, where the truth model replays the held-out
+    # recording under twice the noise floor (free rows; joint rows have no floor estimate: every in-vocabulary one)
+    bodies = [r for r in rows if r["mass_pct"] is not None and r["concealed"] not in OOV_EFFECTS
+              and (r["floor_m"] is None or r["rmse_true_m"] < 2 * r["floor_m"])]
+    for kind in ("free", "joint"):
+        of = [r for r in bodies if r["kind"] == kind]
+        if of:
+            mass = sum(abs(r["mass_pct"]) <= 3 for r in of)
+            det = sum(abs(r["determined_pct"]) <= 5 for r in of)
+            print(f"body after the diagnosis ({kind}, {len(of)} rows whose truth replays under twice the floor): "
+                  f"mass within 3 % in {mass}, {'moment or mass the joint determines' if kind == 'joint' else 'inertia'}"
+                  f" within 5 % in {det}; COM error median {np.median([r['com_mm'] for r in of]):.2f} mm")
     print(f"held-out position RMSE at least halved: {len(halved)}/{len(reported)} where an effect is reported")
-    # the true model's own replay: how far any model could lower the base model's error on these recordings
     halvable = [r for r in reported if r["rmse_true_m"] <= 0.5 * r["rmse_before_m"]]
     print(f"  the true model halves it in {len(halvable)}/{len(reported)}; ours halves it in "
           f"{sum(r in halved for r in halvable)} of those {len(halvable)}")
@@ -366,12 +245,11 @@ def _summary(rows: list[dict]) -> None:
                    np.sqrt(max(r["rmse_after_m"] ** 2 - r["rmse_true_m"] ** 2, 0.0))) for r in reported]
         print(f"  error above the true model's, sqrt(rmse^2 - truth^2), at least halved: "
               f"{sum(after <= 0.5 * before for before, after in excess)}/{len(excess)}")
-    # the same question without the truth: the floor the diagnosis estimates by re-noising the held-out recording
     with_floor = [r for r in reported if r["floor_m"] is not None]  # held bodies
     possible = [r for r in with_floor if r["rmse_before_m"] >= 2 * r["floor_m"]]
     print(f"  error before at least twice the estimated noise floor in {len(possible)}/{len(with_floor)} (free); "
           f"ours halves it in {sum(r in halved for r in possible)} of those {len(possible)}")
-    floors = [r["floor_m"] / r["rmse_true_m"] for r in rows if r["floor_m"] is not None]
+    floors = [r["floor_m"] / r["rmse_true_m"] for r in rows if r["floor_m"] is not None and r["rmse_true_m"]]
     if floors:
         print(f"estimated noise floor / the true model's error, free rows: median {np.median(floors):.2f}, "
               f"range {min(floors):.2f}-{max(floors):.2f}")
