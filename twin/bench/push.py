@@ -33,6 +33,9 @@ def box_izz(mass_kg: float, half_extents_m) -> float:
 
 
 ENGINES = ("newton", "mujoco")
+TRUTH_CONTACT = {"newton": "grid", "mujoco": "box"}
+"""The truth model's support contact per engine: MuJoCo's box (its corners) made the MuJoCo recordings; the
+Newton engine carries the block on an 8 x 8 grid of points, which `PushContact(shape="grid")` copies."""
 
 
 def push_case(seed: int):
@@ -104,7 +107,8 @@ def build_and_replay(engine: str, seed: int, tmp: Path, heldout_offset_m: float 
     mass), then the held-out pushes replayed in MuJoCo by the exported scene.xml and by the truth model.
 
     The truth model is the MuJoCo model of the push without its pusher (`pushed_block_xml`): for MuJoCo-made
-    recordings the model that made them, for Newton-made ones the true parameters on MuJoCo's contact.
+    recordings the model that made them, for Newton-made ones the true parameters on the Newton engine's
+    support grid in MuJoCo (`TRUTH_CONTACT`; "truth_box_mm": on MuJoCo's box instead).
     Both replay the same windows the same way (`replay_pushed_model`); the ratio is the export's error over
     the truth's.
     """
@@ -114,8 +118,9 @@ def build_and_replay(engine: str, seed: int, tmp: Path, heldout_offset_m: float 
 
     from pipelines.identify.sliding import PlanarBody
     from pipelines.logs import read_recording
-    from pipelines.synth.mujoco_push import PushedSampleConfig, make_pushed_sample, push_settings, pushed_block_xml
-    from pipelines.synth.mujoco_push import PushContact
+    from pipelines.synth.mujoco_push import (
+        PushContact, PushedSampleConfig, make_pushed_sample, push_settings, pushed_block_xml,
+    )
     from pipelines.validate import replay_pushed_model
     from twin.build import BuildConfig, build
 
@@ -129,9 +134,14 @@ def build_and_replay(engine: str, seed: int, tmp: Path, heldout_offset_m: float 
     seconds = time.perf_counter() - t0
     asset = json.loads((Path(out) / "asset.json").read_text())
     exported = asset["provenance"]["heldout_replay"]["mujoco"]
-    model = mujoco.MjModel.from_xml_string(pushed_block_xml(push, push_settings(), PushContact(), pusher=False))
     planar = PlanarBody(push.half_extents_m, push.mass_kg, box_izz(push.mass_kg, push.half_extents_m))
-    truth = replay_pushed_model(model, "block", planar, read_recording(sample / "heldout.mcap"), exported["window_s"])
+    heldout = read_recording(sample / "heldout.mcap")
+    truth = {}
+    for shape in ("box", "grid"):
+        model = mujoco.MjModel.from_xml_string(pushed_block_xml(push, push_settings(), PushContact(shape=shape),
+                                                                pusher=False))
+        truth[shape] = replay_pushed_model(model, "block", planar, heldout, exported["window_s"])
+    truth = truth[TRUTH_CONTACT[engine]] | {"box_rmse_position_m": truth["box"]["rmse_position_m"]}
     theta = asset["theta"]
     return {
         "engine": engine, "seed": seed, "mu_true": push.mu, "mu": theta["friction"]["value"],
@@ -141,6 +151,7 @@ def build_and_replay(engine: str, seed: int, tmp: Path, heldout_offset_m: float 
                               - 1),
         "effects": [e["name"] for e in asset["effects"]],
         "export_mm": 1e3 * exported["rmse_position_m"], "truth_mm": 1e3 * truth["rmse_position_m"],
+        "truth_box_mm": 1e3 * truth["box_rmse_position_m"],
         "ratio": exported["rmse_position_m"] / truth["rmse_position_m"],
         "export_deg": float(np.degrees(exported["rmse_heading_rad"])),
         "truth_deg": float(np.degrees(truth["rmse_heading_rad"])),
@@ -150,17 +161,17 @@ def build_and_replay(engine: str, seed: int, tmp: Path, heldout_offset_m: float 
 
 
 def _bench_case(args) -> tuple[list[dict], dict]:
-    engine, seed, prior_mass_factor, mu_prior = args
+    engine, seed, prior_mass_factor, mu_prior, identification = args
     from twin.build import quiet_warp
 
     quiet_warp()
     with tempfile.TemporaryDirectory() as tmp:
-        return (_identify_modes(engine, seed, Path(tmp), prior_mass_factor, mu_prior),
-                build_and_replay(engine, seed, Path(tmp)))
+        modes = _identify_modes(engine, seed, Path(tmp), prior_mass_factor, mu_prior) if identification else []
+        return modes, build_and_replay(engine, seed, Path(tmp))
 
 
 def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float = 0.5, engine: str = "both",
-               workers: int = 1) -> dict:
+               workers: int = 1, identification: bool = True) -> dict:
     """Print and return, per seed and engine, the identification's errors and the build's.
 
     engine: "newton" (pipelines/synth/push.py, twin's own model), "mujoco" (pipelines/synth/mujoco_push.py:
@@ -175,12 +186,13 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
 
     Build: `build_and_replay` (the user's `twin build` with a held-out push and the weighed mass): the
     friction it reports, the effects its diagnosis reports on these clean pushes, and the exported scene's
-    MuJoCo replay of the held-out pushes against the truth model's. workers: seeds run in parallel processes.
+    MuJoCo replay of the held-out pushes against the truth model's. workers: seeds run in parallel processes;
+    identification False: the builds alone.
     """
     if engine not in (*ENGINES, "both"):
         raise ValueError(f"engine: expected newton, mujoco or both, got {engine!r}")
     engines = ENGINES if engine == "both" else (engine,)
-    cases = [(e, seed, prior_mass_factor, mu_prior) for seed in range(seeds) for e in engines]
+    cases = [(e, seed, prior_mass_factor, mu_prior, identification) for seed in range(seeds) for e in engines]
     if workers > 1:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
@@ -191,7 +203,8 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
         results = [_bench_case(c) for c in cases]
     rows = [r for modes, _ in results for r in modes]
     builds = [b for _, b in results]
-    _print_identification(rows, engines, seeds, prior_mass_factor, mu_prior)
+    if rows:
+        _print_identification(rows, engines, seeds, prior_mass_factor, mu_prior)
     _print_builds(builds, engines)
     return {"identification": rows, "build": builds}
 
@@ -224,9 +237,9 @@ def _print_builds(builds, engines) -> None:
     print("\nbuild (`twin build` with --holdout and the weighed mass): friction, effects reported on these clean "
           "pushes, and the held-out pushes replayed in MuJoCo, position RMSE of the exported scene.xml against the "
           "truth model's (the MuJoCo model that made the recording; for Newton-made ones the true parameters on "
-          "MuJoCo's contact)")
-    cells = ["mu err %", "Izz err %", "effects", "export mm", "truth mm", "ratio", "head ratio"]
-    width = [8, 9, 16, 9, 8, 6, 10]
+          "the Newton engine's 8 x 8 support grid in MuJoCo; 'box mm': on MuJoCo's box)")
+    cells = ["mu err %", "Izz err %", "effects", "export mm", "truth mm", "ratio", "head ratio", "box mm"]
+    width = [8, 9, 16, 9, 8, 6, 10, 6]
     print(f"{'seed':>4} " + " | ".join(" ".join(f"{c:>{w}}" for c, w in zip(cells, width)) for _ in engines))
     print(f"{'':>4} " + " | ".join(f"{e:^{sum(width) + len(width) - 1}}" for e in engines))
     for seed in sorted({b["seed"] for b in builds}):
@@ -235,7 +248,7 @@ def _print_builds(builds, engines) -> None:
             b = next(x for x in builds if x["seed"] == seed and x["engine"] == engine)
             effects = ",".join(b["effects"]) or "none"
             parts.append(f"{b['mu_err_pct']:+8.2f} {b['izz_err_pct']:+9.1f} {effects[:16]:>16} {b['export_mm']:9.3f} "
-                         f"{b['truth_mm']:8.3f} {b['ratio']:6.2f} {b['heading_ratio']:10.2f}")
+                         f"{b['truth_mm']:8.3f} {b['ratio']:6.2f} {b['heading_ratio']:10.2f} {b['truth_box_mm']:6.3f}")
         print(f"{seed:4d} " + " | ".join(parts))
     for engine in engines:
         got = [b for b in builds if b["engine"] == engine]
