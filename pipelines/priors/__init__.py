@@ -11,6 +11,7 @@ from .geometry import (
     infill_moments,
     inner_moments,
     moments_from_mesh,
+    part_pseudo_inertias,
     shell_moments,
     solid_moments,
     uniform_density_prior,
@@ -19,6 +20,6 @@ from .vlm import ObjectFacts, VlmConfig, VlmGuess, ask_vlm, describe_object, par
 
 __all__ = [
     "BodyMoments", "ObjectFacts", "Prior", "PriorConfig", "VlmConfig", "VlmGuess", "ask_vlm", "describe_object",
-    "estimate_prior", "infill_moments", "inner_moments", "moments_from_mesh", "parse_answer", "scan_image",
-    "shell_moments", "solid_moments", "uniform_density_prior",
+    "estimate_prior", "infill_moments", "inner_moments", "moments_from_mesh", "parse_answer", "part_pseudo_inertias",
+    "scan_image", "shell_moments", "solid_moments", "uniform_density_prior",
 ]

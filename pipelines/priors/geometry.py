@@ -104,6 +104,15 @@ class BodyMoments:
         S = self.second - self.volume * np.outer(c, c)
         return np.trace(S) * np.eye(3) - S
 
+    def pseudo_inertia(self) -> np.ndarray:
+        """The 4x4 pseudo-inertia per unit density about the frame origin, [[second, first], [first^T, volume]]
+        [m^5, m^4, m^3]: a body of parts with densities rho_k has sum_k rho_k P_k (`pipelines.identify.posterior`)."""
+        P = np.empty((4, 4))
+        P[:3, :3] = self.second
+        P[:3, 3] = P[3, :3] = self.first
+        P[3, 3] = self.volume
+        return P
+
     def inertial(self, density: float) -> Inertial:
         """The body at a uniform `density` [kg/m^3]."""
         return Inertial(density * self.volume, tuple(self.com), density * self.unit_inertia())
@@ -231,3 +240,10 @@ def uniform_density_prior(mesh_object, material: MaterialRange, inertia_spread: 
     friction = (material.friction, material.friction_low, material.friction_high)
     return Prior(uniform, tuple(map(float, lower)), tuple(map(float, upper)), material, volume, uniform,
                  friction=friction, friction_kinetic=material.kinetic())
+
+
+def part_pseudo_inertias(meshes) -> np.ndarray:
+    """Pseudo-inertias per unit density [K, 4, 4] of closed part meshes (the decomposition's convex parts, in the
+    object frame), for per-part densities in the posterior; parts of no volume are left out."""
+    out = [moments_from_mesh(m).pseudo_inertia() for m in meshes]
+    return np.array([P for P in out if P[3, 3] > 0]).reshape(-1, 4, 4)

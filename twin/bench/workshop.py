@@ -71,7 +71,9 @@ class WorkshopCase:
 
     All bodies in the mirrored object frame (see MIRROR) [kg, m, kg m^2 about the COM]: truth (SolidWorks),
     uniform (the mesh at uniform density and the true mass, as the authors' GEO prior). mesh: trimesh in that
-    frame [m]; parts: the authors' segmentation as `BodyMoments` per part (their HPS input); grasp: the grasp
+    frame [m]; parts: the authors' segmentation as `BodyMoments` per part (their HPS input); points, volumes:
+    the segmentation's points (tetrahedron centroids) in that frame [m] and their volumes scaled to the
+    mesh's [m^3]; grasp: the grasp
     (sensor) frame in the dataset's mesh frame, 4x4; extents_mesh: bounding-box extents of the segmentation's
     points in the mesh frame [m] (the authors' bounding box).
     """
@@ -83,6 +85,8 @@ class WorkshopCase:
     X_tracked_body: object
     mesh: object
     parts: tuple
+    points: np.ndarray
+    volumes: np.ndarray
     grasp: np.ndarray
     extents_mesh: np.ndarray
 
@@ -123,7 +127,7 @@ def workshop_case(tool: str, directory: Path, rng: np.random.Generator, root: Pa
     X_tracked_body = np.linalg.inv(grasp)
     X_tracked_body[:3, :3] = MIRROR @ X_tracked_body[:3, :3] @ MIRROR
     X_tracked_body[:3, 3] = MIRROR @ X_tracked_body[:3, 3]
-    parts, extents = _segmentation_parts(root, tool, mesh.volume)
+    parts, points, volumes, extents = _segmentation_parts(root, tool, mesh.volume)
 
     force_n, torque_nm, accel, angular = NOISE_LEVELS[level]
     sigma_p, sigma_r = pose_noise_from_acceleration(accel, angular) if pose_sigma is None else pose_sigma
@@ -138,26 +142,41 @@ def workshop_case(tool: str, directory: Path, rng: np.random.Generator, root: Pa
     write_recording(path, pose=PoseTrack(t, position, quat, "world", "ft_sensor", "/tracker/pose"),
                     wrench=WrenchTrack(t, force, torque, "/ft_sensor/wrench", "world"))
     pose = Pose(tuple(X_tracked_body[:3, 3]), tuple(Rotation.from_matrix(X_tracked_body[:3, :3]).as_quat()))
-    return WorkshopCase(tool, read_recording(path), truth, uniform, pose, mesh, parts, grasp, extents)
+    return WorkshopCase(tool, read_recording(path), truth, uniform, pose, mesh, parts, points, volumes, grasp, extents)
 
 
 def _segmentation_parts(root: Path, tool: str, volume_m3: float):
     """The authors' part segmentation (data/Segmentations, their HPS input) as per-part `BodyMoments` in the
     mirrored object frame: each point the centroid of a tetrahedron of the given volume, the volumes scaled to
-    the mesh's; and the points' bounding-box extents in the dataset's mesh frame [m]."""
-    from pipelines.priors import BodyMoments
-
+    the mesh's; the points and volumes themselves; and the points' bounding-box extents in the dataset's mesh
+    frame [m]."""
     name = tool.replace(" ", "_")
     points, labels, volumes = _read_segmentation(root / "data" / "Segmentations" / name / f"{name}.ply")
     extents = points.max(axis=0) - points.min(axis=0)
     volumes = volumes * volume_m3 / volumes.sum()
     mirrored = points @ MIRROR
+    return _cloud_parts(mirrored, volumes, labels), mirrored, volumes, extents
+
+
+def _cloud_parts(points: np.ndarray, volumes: np.ndarray, labels: np.ndarray) -> tuple:
+    """`BodyMoments` per label of volume-weighted points [m, m^3]."""
+    from pipelines.priors import BodyMoments
+
     parts = []
     for label in np.unique(labels):
         keep = labels == label
-        v, p = volumes[keep], mirrored[keep]
+        v, p = volumes[keep], points[keep]
         parts.append(BodyMoments(float(v.sum()), (v[:, None] * p).sum(axis=0), np.einsum("n,ni,nj->ij", v, p, p)))
-    return tuple(parts), extents
+    return tuple(parts)
+
+
+def geometry_parts(case: WorkshopCase, count: int = 4, seed: int = 0) -> tuple:
+    """Parts from geometry alone: the segmentation's points split into `count` clusters by position (k-means,
+    the labels unused), as a build's decomposition splits a mesh without knowing its materials."""
+    from scipy.cluster.vq import kmeans2
+
+    _, labels = kmeans2(case.points, count, seed=seed, minit="++")
+    return _cloud_parts(case.points, case.volumes, labels)
 
 
 def _read_segmentation(path: Path):
@@ -324,22 +343,27 @@ def _flat(body) -> np.ndarray:
 
 
 def bench_workshop(seeds: int = 10, levels: tuple[str, ...] = ("No", "Low", "Mod", "High"),
-                   tools: tuple[str, ...] = WORKSHOP_TOOLS, method: str = "newton", parts: bool = True,
+                   tools: tuple[str, ...] = WORKSHOP_TOOLS, method: str = "newton", parts: str = "segmentation",
                    root: Path = WORKSHOP) -> list[dict]:
     """The six Workshop Tools at the authors' noise levels, `seeds` noise draws each, identified as a build
     does (`identify_held`) from the mesh and a named material (`TOOL_MATERIAL`, `material_prior`); prints the
     authors' metrics averaged over tools and seeds per level and estimator, beside their published OLS, GEO
     and HPS results for the same tools, and returns one row per tool, level, seed and estimator.
 
-    Estimators: least squares (raw); the posterior with the uniform-density prior; the posterior with the
-    authors' part segmentation (their HPS input) as per-part densities (`parts`); what `identify_held` keeps
-    (method "newton": the Newton fit competes, "ls": it does not run); a run that raises is counted, not
-    fatal. Coverage: the share of the ten flat parameters (mass, COM, inertia about the COM) whose reported
+    Estimators: least squares (raw); the posterior with the uniform-density prior; the posterior with
+    per-part densities over `parts`: "segmentation" (the authors' part segmentation, their HPS input),
+    "geometry" (`geometry_parts`: four clusters of the same points by position, no labels) or "none"; what
+    `identify_held` keeps with those parts (method "newton": the Newton fit competes, "ls": it does not
+    run). A run that raises is counted, not fatal. Coverage: the share of the ten flat parameters (mass, COM, inertia about the COM) whose reported
     95 % interval holds the truth.
     """
     from pipelines.identify import IdentifyConfig, identify_held
-    from pipelines.identify.posterior import data_term_from_least_squares, identify_posterior, pseudo_inertia
+    from pipelines.identify.posterior import data_term_from_least_squares, identify_posterior
 
+    if parts not in ("segmentation", "geometry", "none"):
+        raise ValueError(f"bench workshop: parts {parts!r}, expected 'segmentation', 'geometry' or 'none'")
+    if method not in ("newton", "ls"):
+        raise ValueError(f"bench workshop: method {method!r}, expected 'newton' or 'ls'")
     unknown = [lv for lv in levels if lv not in NOISE_LEVELS]
     if unknown:
         raise ValueError(f"bench workshop: unknown noise level(s) {unknown}, expected some of {list(NOISE_LEVELS)}")
@@ -353,11 +377,12 @@ def bench_workshop(seeds: int = 10, levels: tuple[str, ...] = ("No", "Low", "Mod
                 if seed == 0:
                     bounds_pct[level, tool] = mass_bound_pct(case, level, root)
                 prior, bounds = material_prior(case.mesh, TOOL_MATERIAL[tool])
-                part_P = np.array([pseudo_inertia(p.volume, p.com, p.unit_inertia()) for p in case.parts])
+                split = {"segmentation": case.parts, "geometry": geometry_parts(case), "none": ()}[parts]
+                part_P = np.array([p.pseudo_inertia() for p in split]).reshape(-1, 4, 4)
                 found, t0 = {}, time.perf_counter()
                 try:
                     held = identify_held([case.recording], None, case.X_tracked_body, prior, bounds, IdentifyConfig(),
-                                         method, parts=part_P if parts else None)
+                                         method, parts=part_P if len(part_P) else None)
                     seconds = time.perf_counter() - t0
                     uniform = identify_posterior(
                         [data_term_from_least_squares(held.least_squares.pi, held.least_squares.normal,
@@ -365,8 +390,7 @@ def bench_workshop(seeds: int = 10, levels: tuple[str, ...] = ("No", "Low", "Mod
                         case.X_tracked_body, prior, (bounds.lower[0], bounds.upper[0]))
                     found = {"least squares": (held.least_squares.inertial, held.least_squares.covariance),
                              "posterior, uniform density": (uniform.inertial, uniform.covariance),
-                             "posterior, parts" if parts else "posterior": (held.posterior.inertial,
-                                                                             held.posterior.covariance),
+                             f"posterior, {parts} parts": (held.posterior.inertial, held.posterior.covariance),
                              "kept": (held.inertial, held.covariance)}
                     error, choice, dominated = None, held.choice, list(held.prior_dominated)
                 except Exception as exc:  # noqa: BLE001 - the bench counts what raises
