@@ -65,7 +65,7 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     validate, replay the held-out trial in MuJoCo."""
     from assets import Asset, Fit, FitMetrics, Geometry, Joint, asset_to_json, write_asset
     from exporters import export_all
-    from pipelines.identify.jointed import JointedConfig, identify_jointed
+    from pipelines.identify.jointed import JointedConfig, identify_jointed, joint_windows, q_and_position_rmse
     from pipelines.identify.kind import joint_coordinates
     from pipelines.meshes import read_mesh
     from pipelines.validate import replay_jointed_mujoco, validate_jointed_exports
@@ -129,12 +129,17 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
         validation = timer.run("validate", validate_jointed_exports, asset, tmp, files)
         replay = {}
         if holdout is not None:
-            replay = {"mujoco": timer.run("replay (MuJoCo)", replay_jointed_mujoco, paths.mjcf, asset, holdout, fit,
-                                          jconfig),
+            mujoco = timer.run("replay (MuJoCo)", replay_jointed_mujoco, paths.mjcf, asset, holdout, fit, jconfig)
+            # the tracker's noise about the smoothed track: what no model's replay of it can go below
+            w = joint_windows(holdout, fit, jconfig)
+            floor = q_and_position_rmse(fit, w.q_smoothed[1:], w.q[1:])["rmse_position_m"]
+            replay = {"mujoco": mujoco,
                       "newton": held[identified.selected] if kept is identified else
                       {"rmse_q": diagnosis.fits["after"].loss,
-                       "rmse_position_m": diagnosis.fits["after"].rmse_position_m}}
-            log(f"held-out replay: MuJoCo {replay['mujoco']}, Newton {replay['newton']}")
+                       "rmse_position_m": diagnosis.fits["after"].rmse_position_m},
+                      "noise_floor_m": floor, "mujoco_over_noise_floor": mujoco["rmse_position_m"] / floor}
+            log(f"held-out replay: MuJoCo {1000 * mujoco['rmse_position_m']:.3f} mm, Newton "
+                f"{1000 * replay['newton']['rmse_position_m']:.3f} mm, the tracker's noise alone {1000 * floor:.3f} mm")
         provenance = {
             "config": json.loads(json.dumps(asdict(config), default=str)),
             "scan": scan_stats,
