@@ -68,6 +68,8 @@ __all__ = [
 
 GRAVITY_M_S2 = 9.81
 _GRID = 4  # contacts per side of the support face
+SUPPORTS = ("uniform", "corners")
+"""Support-face load models of `SlidingConfig.support`."""
 
 
 @dataclass(frozen=True)
@@ -140,10 +142,18 @@ class SlidingConfig:
     contact_damping_ratio: float = 0.7
     max_delay_s: float = 0.05
     """The force is kept this far beyond each window's ends: the range a time delay is fitted over [s]."""
+    support: str = "uniform"
+    """Where the support face carries the weight: "uniform" (a grid over the face: a flat face on a flat
+    table, the default) or "corners" (its four corners, as MuJoCo's box-plane and mesh-plane contacts put
+    them: about twice the friction moment against turning; docs/pushes.md)."""
     fit_mass: bool = False
     """Fit the mass too. Pushes determine mu m through the force balance; the split rests on the
     accelerations, which 5 ms of force-to-pose timing error moves by about 10 % (twin bench push),
     so by default the mass keeps its prior (marked so) and mu is measured given it."""
+
+    def __post_init__(self):
+        if self.support not in SUPPORTS:
+            raise ValueError(f"SlidingConfig.support: expected one of {SUPPORTS}, got {self.support!r}")
 
 
 @dataclass(frozen=True)
@@ -223,9 +233,12 @@ def _planar_grid(recording, config: "SlidingConfig", smooth: bool):
     return grid, xy, yaw
 
 
-def _support_points(body: PlanarBody) -> np.ndarray:
-    """The support face's point contacts (cell centres of a _GRID x _GRID grid), object frame x, y [m]."""
+def _support_points(body: PlanarBody, config: "SlidingConfig | None" = None) -> np.ndarray:
+    """The support face's point contacts, object frame x, y [m]: the cell centres of a _GRID x _GRID grid
+    (support "uniform"), or the face's four corners ("corners")."""
     hx, hy, _ = body.half_extents_m
+    if config is not None and config.support == "corners":
+        return np.array([(sx * hx, sy * hy) for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)])
     cells = (np.arange(_GRID) + 0.5) / _GRID * 2.0 - 1.0
     return np.array([(gx * hx, gy * hy) for gx in cells for gy in cells])
 
@@ -559,7 +572,7 @@ class SlidingRollout:
         hx, hy, hz = body.half_extents_m
         W = windows.window_count
         radius = 1e-3
-        support = _support_points(body)
+        support = _support_points(body, config)
         n_contacts = len(support)
         ke = body.mass_kg * GRAVITY_M_S2 / config.contact_sink_m
         kd = 2.0 * config.contact_damping_ratio * np.sqrt(ke * body.mass_kg)
@@ -1047,7 +1060,7 @@ def _balance_rows(windows: PushWindows, body: PlanarBody, config: SlidingConfig)
     """Per steady window, the friction wrench per unit mu (X) and the momentum change less the pushing wrench
     (y), world x, y [N] and the moment over the face's half diagonal [N]; None without a steady window."""
     hx, hy, _ = body.half_extents_m
-    grid = _support_points(body)
+    grid = _support_points(body, config)
     normal_n = body.mass_kg * GRAVITY_M_S2 / len(grid)
     lever_m = float(np.hypot(hx, hy))
     span_s = windows.span_s
