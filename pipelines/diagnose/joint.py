@@ -32,7 +32,7 @@ from pipelines.identify.jointed import (
     joint_effect_columns, q_and_position_rmse, replay_jointed,
 )
 
-from .residuals import analyse_joint_residual, describe, unexplained
+from .residuals import analyse_joint_residual, describe, localise_joint_friction, unexplained
 from .screening import Library, fit_subset, screen
 from .select import DiagnoseConfig, Diagnosis, predicts_better
 
@@ -102,6 +102,32 @@ def _time_blocks(recording, blocks: int = 2) -> list:
                     contact=cut(recording.contact, a, b, ("position",)),
                     joints=cut(recording.joints, a, b, ("position", "velocity")), duration_s=float(b - a))
             for a, b in zip(edges[:-1], edges[1:])]
+
+
+def _friction_probe(entry: dict, r: dict) -> np.ndarray:
+    """An unexplained entry's friction as an effort column [N, 1]: sign(q') where it acts."""
+    qd = r["qd"]
+    if "q" in entry["where"]:
+        a, b = entry["where"]["q"]
+        acts = (r["q"] >= a) & (r["q"] <= b)
+    else:
+        acts = np.sign(qd) == (1.0 if entry["where"]["qd"][0] >= 0 else -1.0)
+    return (np.sign(qd) * acts)[:, None]
+
+
+def _friction_map_predicts_better(rows: list[dict], eval_rows: dict, state, names, config, v_s: float) -> bool:
+    """Whether the base model plus the localised frictions of `state` predicts the evaluation effort better
+    (residual sum of squares, least squares on the training rows) than the base model plus `names`."""
+    def heldout_rss(extra) -> float:
+        X = np.concatenate([np.vstack([r["columns"] for r in rows])] + [np.vstack([f(r) for r in rows])
+                                                                        for f in extra], 1)
+        coef, *_ = np.linalg.lstsq(X, np.concatenate([r["tau"] for r in rows]), rcond=None)
+        res = eval_rows["tau"] - np.concatenate([eval_rows["columns"]] + [f(eval_rows) for f in extra], 1) @ coef
+        return float(res @ res)
+
+    effect = [lambda r, c=c: joint_effect_columns(c, r, config, v_s) for c in names]
+    probe = [lambda r, u=u: _friction_probe(u, r) for u in state]
+    return heldout_rss(probe) < heldout_rss(effect)
 
 
 def replay_fit(joint, q_sim: np.ndarray, windows) -> FitMetrics:
@@ -235,8 +261,34 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
     analyse = lambda r: analyse_joint_residual(eval_rows["t_s"], eval_rows["q"], eval_rows["qd"],  # noqa: E731
                                                eval_rows["tau"], r, stride=stride, unit=unit)
     r_before, r_after = residual(()), residual(best)
+
+    def friction_map(r):
+        """Friction-like mismatches localised in q or in the direction of motion, holding a tenth of the
+        residual at least."""
+        return tuple(u for u in localise_joint_friction(eval_rows["q"], eval_rows["qd"], r, stride=stride, unit=unit,
+                                                        q_unit="m" if joint.type == "prismatic" else "rad")
+                     if u["share"] >= 0.1)
+
+    # a friction that depends on position or direction is no candidate: when the base model's residual shows
+    # one and the chosen effect leaves it there, the effect only bent itself to it (a spring fitted to a runner
+    # that catches one way): no effect is reported, the mismatch goes to unexplained and the body's values it
+    # corrupts are flagged
+    state = friction_map(r_before)
+    if best:
+        after_state = friction_map(r_after)
+        if state and (after_state or _friction_map_predicts_better(rows, eval_rows, state, best, jconfig, v_s)):
+            best, state, effects = (), after_state or state, []
+            q_after, final, r_after = q_before, base_fit, r_before
+            fits = {"before": fits["before"], "after": fits["before"]}
+        else:
+            state = after_state
     residuals = {"before": analyse(r_before), "after": analyse(r_after)}
-    left = unexplained(residuals["after"], config.unexplained_share)
+    left = state or unexplained(residuals["after"], config.unexplained_share)
+    doubtful = []
+    if state:
+        doubtful += ["friction", "mass" if joint.type == "prismatic" else "inertia"]
+    if not 0.25 * prior.mass <= final.inertial.mass <= 4 * prior.mass and "mass" not in doubtful:
+        doubtful.append("mass")  # far outside what the geometry and any material allow
     traces = {"t_s": windows.t_s.reshape(-1).tolist(),
               "measured_position": joint.tracked_position(windows.q[1:]).reshape(-1, 3).tolist(),
               "before_position": joint.tracked_position(q_before).reshape(-1, 3).tolist(),
@@ -248,6 +300,6 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
         fits=fits,
         residuals=residuals, findings=tuple(describe(residuals["before"])),
         inertial={"before": base_fit.inertial, "after": final.inertial},
-        heldout=holdout is not None, traces=traces,
+        heldout=holdout is not None, traces=traces, doubtful=tuple(doubtful),
     )
     return diagnosis, final if best else None

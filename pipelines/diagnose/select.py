@@ -53,6 +53,11 @@ class DiagnoseConfig:
     """A COM shift must be this many standard deviations (Mahalanobis) from the prior's ..."""
     com_floor_m: float = 1e-3
     """... and at least this far [m], to be reported as nonuniform_density."""
+    mesh_com_fraction: float = 0.01
+    """Without a measured one, the standard deviation per axis of the uniform-density COM that the reconstructed
+    mesh gives, as a fraction of the body's radius of gyration: a scanned mesh's own COM is uncertain by
+    about this much (a 30 cm wooden mallet's by about a millimetre), and a shift within it is no evidence
+    of a non-uniform density."""
     max_delay_s: float = 0.05
     """Search range of time_delay [s], either sign."""
     unexplained_share: float = 0.2
@@ -325,11 +330,21 @@ def _newton_refit(trials, X_tracked_body: Pose, inertial: Inertial, effect: np.n
     return x, losses
 
 
+def mesh_com_std(prior: Inertial, config: DiagnoseConfig) -> np.ndarray:
+    """The default standard deviation [m] per axis of the uniform-density COM (`DiagnoseConfig.mesh_com_fraction`
+    of the radius of gyration, sqrt(trace(I) / 2m))."""
+    gyration = np.sqrt(max(np.trace(prior.inertia_matrix()), 0.0) / (2 * max(prior.mass, 1e-12)))
+    return np.full(3, config.mesh_com_fraction * gyration)
+
+
 def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
-                  config: DiagnoseConfig = DiagnoseConfig()) -> Diagnosis:
+                  config: DiagnoseConfig = DiagnoseConfig(), com_std_m=None) -> Diagnosis:
     """Diagnose a held body from `trials` (Recordings); `holdout` (a Recording or None) chooses and validates.
 
-    prior: the uniform-density estimate (object frame), whose COM is the reference of nonuniform_density.
+    prior: the uniform-density estimate (object frame), whose COM is the reference of nonuniform_density;
+    com_std_m: the standard deviation [m] of that COM from the reconstructed mesh (a scalar or per object
+    axis; default `mesh_com_std`): a COM shift is reported only where it stands out of the identification's
+    and the mesh's uncertainty together.
     """
     rng = np.random.default_rng(config.seed)
     rows = [_rows(r) for r in trials]
@@ -351,6 +366,9 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
     found_inertial, _ = object_frame_from_pi(model.pi, X_tracked_body)
     shift = np.asarray(found_inertial.com) - np.asarray(prior.com)
     cov = _com_covariance(fitted_lib, tuple(n for n in best if n != "time_delay"), model.pi, X_tracked_body)
+    mesh_std = mesh_com_std(prior, config) if com_std_m is None else np.broadcast_to(
+        np.asarray(com_std_m, dtype=float), (3,))
+    cov = cov + np.diag(mesh_std**2)
     mahalanobis = float(np.sqrt(max(shift @ np.linalg.pinv(cov) @ shift, 0.0)))
     chosen = "+".join(best) or "none"
     scores[f"{chosen} (uniform-density COM)"] = _heldout_score(trials, holdout, best, com_tracked, config,
@@ -417,7 +435,7 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
         effects.append(Effect(NONUNIFORM_DENSITY, {"com_shift": shift.tolist()}, {
             "mahalanobis": mahalanobis, "belongs": "object",
             "criterion_gain": scores[f"{chosen} (uniform-density COM)"] - scores[chosen],
-            "std": {"com_shift": np.sqrt(np.diag(cov)).tolist()},
+            "std": {"com_shift": np.sqrt(np.diag(cov)).tolist()}, "mesh_com_std_m": mesh_std.tolist(),
         }))
     for e in effects:
         e.evidence.update({"heldout_rmse_position_before_m": fit_before.rmse_position_m,
@@ -445,4 +463,6 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
         fits={"before": fit_before, "after": fit_after}, residuals=residuals,
         findings=tuple(describe(residuals["before"])), inertial={"before": before_inertial, "after": after_inertial},
         heldout=holdout is not None, traces=traces, noise_floor=floor,
+        # what no candidate explains was absorbed by the body's least squares: its values are not measured
+        doubtful=("mass", "com", "inertia") if sum(u["share"] for u in left) >= config.unexplained_share else (),
     )

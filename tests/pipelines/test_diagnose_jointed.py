@@ -51,3 +51,23 @@ def test_weak_drawer_damping_quantified_in_diagnose_windows(tmp_path):
     config = replace(JointedConfig(), window_s=DiagnoseConfig().joint_window_s)
     ident = identify_jointed([trial], joint, placement, prior, None, config, effects=("viscous_damping",))
     assert ident.value("damping") == pytest.approx(case.effect.params["b"], rel=0.15)
+
+
+def test_friction_by_position_and_direction_localised_in_state():
+    """An effort residual carrying extra friction over a stretch of q, or one way only, is localised there
+    (q range, sign of q'); white noise alone gives nothing."""
+    from pipelines.diagnose.residuals import localise_joint_friction
+
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 8.0, 4000)
+    q = 0.12 + 0.11 * np.sin(2 * np.pi * 0.4 * t) + 0.01 * np.sin(2 * np.pi * 1.1 * t)
+    qd = np.gradient(q, t)
+    noise = rng.normal(size=len(t))
+    assert localise_joint_friction(q, qd, noise, stride=4, unit="m/s", q_unit="m") == ()
+    binding = noise + 1.5 * np.sign(qd) * ((q > 0.15) & (q < 0.2))
+    found = localise_joint_friction(q, qd, binding, stride=4, unit="m/s", q_unit="m")
+    a, b = found[0]["where"]["q"]
+    assert a < 0.2 and b > 0.15 and b - a < 0.12
+    directional = noise + 1.0 * (qd > 0)
+    found = localise_joint_friction(q, qd, directional, stride=4, unit="m/s", q_unit="m")
+    assert [u["where"]["qd"][0] >= 0 for u in found if "qd" in u["where"]] == [True]
