@@ -124,7 +124,7 @@ def identify_held(
                                       r.wrench.torque, X_tracked_body) for r in trials]
     ls = fits_ls[0]
     notes = []
-    ls_body = _physical_or_none(ls.inertial)
+    ls_body = _physical_or_none(ls.inertial) if ls.pi is None or ls.pi[0] > 0 else None
     if ls_body is None:
         notes.append("least squares is not a physical body (not replayed)")
     posterior = identify_posterior([data_term_from_least_squares(f.pi, f.normal, f.meat) for f in fits_ls],
@@ -137,11 +137,14 @@ def identify_held(
     newton = None
     if method == "newton":
         starts = [posterior.inertial] + prior_starts(prior, bounds, config.starts - 1, config.seed)
-        newton = identify_free_body(windows_from_recordings(trials, config), X_tracked_body, starts, bounds, config,
-                                    progress)
-        if _physical_or_none(newton.inertial) is not None:
+        try:
+            newton = identify_free_body(windows_from_recordings(trials, config), X_tracked_body, starts, bounds,
+                                        config, progress)
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
+            notes.append(f"the Newton fit failed ({exc})")
+        if newton is not None and _physical_or_none(newton.inertial) is not None:
             candidates["newton"] = newton.inertial
-        else:
+        elif newton is not None:
             notes.append("the Newton fit ended on a body that cannot be replayed")
 
     fits, window_impulse, traces = _replay(holdout or trials[0], X_tracked_body, candidates, config)
