@@ -128,11 +128,11 @@ def test_scan_without_depth_fails_cleanly(tmp_path, existing_out):
 
 
 def test_build_from_a_mesh_file(tmp_path):
-    """A watertight mesh is accepted as SOURCE; least squares alone recovers the mass."""
+    """A watertight mesh is accepted as SOURCE; without the Newton fit the posterior recovers the mass."""
     out = tmp_path / "out"
     proc = twin("build", str(SAMPLE / "truth_mesh.obj"), "--logs", str(SAMPLE / "trial.mcap"), "-o", str(out),
                 "--method", "ls", "--material", "pla_printed")
     assert proc.returncode == 0, proc.stderr
     asset = json.loads((out / "asset.json").read_text())
-    assert asset["name"] == "truth_mesh" and asset["provenance"]["identify"]["selected"] == "least_squares"
+    assert asset["name"] == "truth_mesh" and asset["provenance"]["identify"]["selected"] == "posterior"
     assert asset["theta"]["mass"]["value"] == pytest.approx(0.02, rel=0.02)
