@@ -142,12 +142,14 @@ def identify_held(
                                         config, progress)
         except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
             notes.append(f"the Newton fit failed ({exc})")
-        if newton is not None and _physical_or_none(newton.inertial) is not None:
+        if newton is not None:
             candidates["newton"] = newton.inertial
-        elif newton is not None:
-            notes.append("the Newton fit ended on a body that cannot be replayed")
 
-    fits, window_impulse, traces = _replay(holdout or trials[0], X_tracked_body, candidates, config)
+    thetas = {"posterior": posterior.theta, **({"newton": newton.theta} if newton is not None else {})}
+    fits, window_impulse, traces = _replay(holdout or trials[0], X_tracked_body, candidates, config, thetas)
+    for label in [k for k in candidates if k not in fits]:
+        notes.append(f"{label} is not a body that can be replayed (left out)")
+        del candidates[label]
     impulse = {k: np.sqrt(v.mean(axis=0)).tolist() for k, v in window_impulse.items()}
     selected = "posterior"
     if "newton" not in candidates:
@@ -170,7 +172,8 @@ def identify_held(
     inertial, covariance = ((newton.inertial, newton.covariance) if selected == "newton"
                             else (posterior.inertial, posterior.covariance))
     traces = {"t_s": traces["t_s"], "measured_position": traces["measured_position"], "window_s": traces["window_s"],
-              "baseline_position": traces["baseline_position"], "final_position": traces[f"{selected}_position"]}
+              "baseline_position": traces.get("baseline_position", traces[f"{selected}_position"]),
+              "final_position": traces[f"{selected}_position"]}
     return HeldIdentification(
         inertial=inertial, covariance=covariance, selected=selected, candidates=candidates, fits=fits,
         impulse_rms=impulse, traces=traces, loss_history=newton.loss_history if newton else (), least_squares=ls,
@@ -240,12 +243,22 @@ def _clip_into_bounds(inertial: Inertial, prior: Inertial, bounds: InertialBound
     return candidate
 
 
-def _replay(recording, X_tracked_body: Pose, candidates: dict, config: IdentifyConfig):
+def _replay(recording, X_tracked_body: Pose, candidates: dict, config: IdentifyConfig,
+            thetas: dict | None = None):
     """Windowed replay from measured (unsmoothed) states for each candidate body, side by side.
 
-    Returns FitMetrics per candidate, its momentum-scaled mean squares per window [W, 2]
-    (position, rotation), and position traces.
+    thetas: log-Cholesky parameters of candidates that have them (exact, where converting a body on the edge
+    of the triangle inequality back could fail); a candidate with neither is converted, moved to the nearest
+    physical inertia if it must be, and left out of the results if even that fails. Returns FitMetrics per
+    candidate, its momentum-scaled mean squares per window [W, 2] (position, rotation), and position traces.
     """
+    thetas = dict(thetas or {})
+    for label, body in candidates.items():
+        if label not in thetas:
+            fixed = _physical_or_none(body)
+            if fixed is not None:
+                thetas[label] = theta_from_physical(fixed.mass, fixed.com, fixed.inertia_matrix())
+    candidates = {k: v for k, v in candidates.items() if k in thetas}
     windows = windows_from_recordings([recording], replace(config, smoothing_hz=None))
     rollout = FreeBodyRollout(windows, X_tracked_body, sets=len(candidates), device=config.device)
     t = windows.t_start_s[None, :] + windows.dt_s * windows.substeps * np.arange(1, windows.sample_count + 1)[:, None]
@@ -253,7 +266,7 @@ def _replay(recording, X_tracked_body: Pose, candidates: dict, config: IdentifyC
     traces = {"t_s": t.T.reshape(-1).tolist(), "measured_position": measured.transpose(1, 0, 2).reshape(-1, 3).tolist(),
               "window_s": windows.window_s}
     fits, window_impulse = {}, {}
-    thetas = np.stack([theta_from_physical(c.mass, c.com, c.inertia_matrix()) for c in candidates.values()])
+    thetas = np.stack([thetas[k] for k in candidates])
     all_scaled = rollout.residuals(thetas, momentum_scaled=True)
     all_plain = rollout.residuals(thetas, momentum_scaled=False)
     for k, label in enumerate(candidates):
