@@ -207,9 +207,10 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
         IdentifyConfig, InertialBounds, identify_held, tracked_to_object, with_weighed_mass,
     )
     from pipelines.validate import validate_exports
-    from twin.summary import bounds_flags
+    from pipelines.priors import part_pseudo_inertias
+    from twin.summary import bounds_flags, dominated_flags
 
-    diagnosis = None
+    diagnosis, dominated = None, set()
     if detection.kind == "sliding":
         from pipelines.diagnose import diagnose_pushed
         from pipelines.identify.sliding import SlidingConfig, identify_pushed
@@ -236,10 +237,11 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
             held = timer.run(
                 "identify", identify_held, trials, holdout, X_tracked_body, prior.inertial,
                 InertialBounds(prior.lower, prior.upper), id_config, config.method, _progress_logger(log),
+                parts=part_pseudo_inertias(parts.parts),
             )
-        if held.selected != config.method and config.method == "newton":
-            log("the Newton fit does not predict the held-out recording significantly better: keeping least squares")
+        log(f"  kept the {held.choice}")
         inertial, covariance = held.inertial, held.covariance
+        dominated = set(held.prior_dominated)
         fit_baseline, fit_final = held.fits["baseline"], held.fits[held.selected]
         if config.diagnose:
             diagnosis = timer.run("diagnose", diagnose_held, trials, holdout, X_tracked_body, prior.uniform,
@@ -249,6 +251,7 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
                 # the identification lacked the effect, so its estimate is biased: the refit with it is kept
                 inertial, fit_final = diagnosis.inertial["after"], diagnosis.fits["after"]
                 fit_baseline = diagnosis.fits["before"]
+                dominated = set()
 
         if config.mass_kg is not None:
             inertial, covariance = with_weighed_mass(inertial, covariance, *config.mass_kg)
@@ -256,10 +259,15 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
         std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
         inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])
         ci = lambda v, s: (np.asarray(v) - 1.96 * np.asarray(s), np.asarray(v) + 1.96 * np.asarray(s))  # noqa: E731
+        # a quantity whose every component the recordings left to the geometry prior is the prior's
+        source = lambda names: "prior" if dominated >= set(names) else "measured"  # noqa: E731
         theta = Theta(
-            mass=Estimate(inertial.mass, std[0], interval95=ci(inertial.mass, std[0]), prior=prior.provenance()),
-            com=Estimate(inertial.com, tuple(std[1:4]), interval95=ci(inertial.com, std[1:4])),
-            inertia=Estimate(inertial.inertia, inertia_std, interval95=ci(inertial.inertia, inertia_std)),
+            mass=Estimate(inertial.mass, std[0], source=source(["mass"]), interval95=ci(inertial.mass, std[0]),
+                          prior=prior.provenance()),
+            com=Estimate(inertial.com, tuple(std[1:4]), source=source(["com_x", "com_y", "com_z"]),
+                         interval95=ci(inertial.com, std[1:4])),
+            inertia=Estimate(inertial.inertia, inertia_std, source=source(["Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz"]),
+                             interval95=ci(inertial.inertia, inertia_std)),
             friction=Estimate(
                 prior.friction[0], (prior.friction[2] - prior.friction[1]) / 4, source="prior",
                 interval95=(prior.friction[1], prior.friction[2]),
@@ -288,7 +296,7 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
             fit=fit,
             effects=diagnosis.effects if diagnosis else (),
             unexplained=diagnosis.unexplained if diagnosis else (),
-            flags=bounds_flags(theta, prior.lower, prior.upper),
+            flags=bounds_flags(theta, prior.lower, prior.upper) + dominated_flags(dominated),
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), "report": "report.html"}

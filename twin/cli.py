@@ -45,7 +45,8 @@ class Build:
     name: str | None = None
     """Asset name (default: from object.json or the mesh file name)."""
     method: Literal["newton", "ls"] = "newton"
-    """newton: differentiable simulation started from least squares; ls: least squares only."""
+    """newton: the posterior (least squares' likelihood with the geometry prior), then the Newton fit from it,
+    kept only when it predicts the held-out recording significantly better; ls: the posterior alone."""
     window_s: float = 0.1
     """Shooting-window length [s]."""
     max_iterations: int = 30
@@ -157,10 +158,13 @@ class Bench:
     furniture: drawers and doors scanned in their furniture from the front (three noise levels) against the truth.
     fuzz: seconds until a wrong SOURCE, OUT, material or topic is reported; then every reader fed --inputs
       seeded mutations of a valid file: outcomes counted, uncaught ones listed.
+    workshop: the Workshop Tools benchmark (six real tools) at the authors' noise levels, --seeds draws each:
+      our estimators beside the published OLS, GEO and HPS, on the authors' metrics.
     """
 
     what: tyro.conf.Positional[Literal["sample", "paper", "priors", "throughput", "crlb", "mujoco", "reconstruct",
-                                       "push", "push-real", "push-mit", "diagnose", "fuzz", "furniture"]]
+                                       "push", "push-real", "push-mit", "diagnose", "fuzz", "furniture",
+                                       "workshop"]]
     sample: Path = Path("samples/cube")
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
@@ -189,6 +193,14 @@ class Bench:
     noise: tuple[str, ...] = ()
     """reconstruct, furniture: depth-noise levels to run (low, high, sensor; default all), without the
     noise-free scans."""
+    levels: tuple[Literal["No", "Low", "Mod", "High"], ...] = ("No", "Low", "Mod", "High")
+    """workshop: the authors' noise levels to run."""
+    identify_with: Literal["ls", "newton"] = "ls"
+    """workshop: ls, the posterior a build keeps without a held-out recording; newton, the build's whole path
+    (the Newton fit from the posterior too; about 10 s a run)."""
+    parts: Literal["segmentation", "geometry", "none"] = "segmentation"
+    """workshop: per-part densities over the authors' segmentation, over parts found from geometry alone, or a
+    uniform density."""
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
     engine: Literal["newton", "mujoco", "both"] = "both"
@@ -427,6 +439,11 @@ def _dispatch(command) -> None:
             else:
                 bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases,
                                engine=command.engine)
+        elif command.what == "workshop":
+            from twin.bench.workshop import bench_workshop
+
+            bench_workshop(command.seeds, command.levels, method=command.identify_with,
+                           parts=command.parts)
         elif command.what == "furniture":
             from twin.bench.furniture import bench_furniture
 

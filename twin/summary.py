@@ -6,7 +6,15 @@ from __future__ import annotations
 import numpy as np
 
 _ESTIMATES = {"newton": "the Newton fit", "least_squares": "least squares", "baseline": "the prior",
-              "prior": "the prior"}
+              "prior": "the prior", "posterior": "the posterior (the recordings with the geometry prior)"}
+
+
+def dominated_flags(dominated: set) -> tuple[dict, ...]:
+    """The inertial components the recordings could not determine (`HeldIdentification.prior_dominated`)."""
+    if not dominated:
+        return ()
+    return ({"parameter": "inertial", "problem": "prior-dominated: the recordings could not determine these; the "
+             "values are mostly the geometry prior's", "components": sorted(dominated)},)
 
 
 def bounds_flags(theta, lower, upper) -> tuple[dict, ...]:
@@ -48,6 +56,8 @@ def flag_line(flag: dict) -> str:
     if flag.get("parameter") == "geometry" and flag.get("value") is not None:
         return (f"{flag['problem']}: {1000 * flag['value']:.1f} +- {1000 * (flag.get('std') or 0):.1f} mm "
                 f"({flag.get('from', '')})")
+    if flag.get("components"):
+        return f"{flag.get('parameter', '?')}: {flag.get('problem', '')} ({', '.join(flag['components'])})"
     return f"{flag.get('parameter', '?')}: {flag.get('problem', '')}"
 
 
@@ -57,7 +67,9 @@ def summary_lines(doc: dict) -> list[str]:
     identify = provenance.get("identify", {})
     lines = []
     selected = identify.get("selected")
-    if selected:
+    if identify.get("choice"):
+        lines.append(f"kept the {identify['choice']}")
+    elif selected:
         fits = identify.get("heldout_fits") or identify.get("fits", {}).get("holdout") or {}
         rmse = {k: v.get("rmse_position_m") for k, v in fits.items() if isinstance(v, dict)}
         if selected in rmse and len(rmse) > 1:
