@@ -213,12 +213,16 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
     diagnosis, dominated = None, set()
     if detection.kind == "sliding":
         from pipelines.diagnose import diagnose_pushed
-        from pipelines.identify.sliding import SlidingConfig, identify_pushed
+        from pipelines.identify.sliding import SUPPORTS, SlidingConfig, identify_pushed
 
         body, mu_prior = _sliding_body(mesh_object, prior)
-        sconfig = SlidingConfig(moving_speed_m_s=config.push_min_speed_m_s)
         with kind_hint(detection, trials[0]):
-            pushed = timer.run("identify", identify_pushed, trials, holdout, body, mu_prior, sconfig)
+            pushed = timer.run("identify", identify_pushed, trials, holdout, body, mu_prior,
+                               SlidingConfig(moving_speed_m_s=config.push_min_speed_m_s), supports=SUPPORTS)
+        # the support the pushes chose: the diagnosis, the replay and the export use it too
+        sconfig = pushed.config
+        if pushed.support is not None:
+            log(f"  {pushed.support.words}")
         refit = None
         if config.diagnose:
             diagnosis, refit = timer.run("diagnose", diagnose_pushed, trials, [holdout] if holdout else [], body,
@@ -297,6 +301,8 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
             effects=diagnosis.effects if diagnosis else (),
             unexplained=diagnosis.unexplained if diagnosis else (),
             flags=bounds_flags(theta, prior.lower, prior.upper) + dominated_flags(dominated),
+            # the exporters read the identification's choices from it (a pushed object's support)
+            provenance=identify_provenance,
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), "report": "report.html"}
