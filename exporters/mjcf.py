@@ -61,7 +61,10 @@ from assets import Asset
 from .names import base_name, file_stem, joint_name, mjcf_name, xml_comment_text
 from .preconditions import exportable_inertial
 
-__all__ = ["SCENE_FILE", "SCENE_OPTIONS", "export_mjcf", "export_scene", "support_height_m"]
+__all__ = [
+    "SCENE_FILE", "SCENE_OPTIONS", "SUPPORT_POINT", "export_mjcf", "export_scene", "support_height_m", "support_model",
+    "support_points_m",
+]
 
 SCENE_FILE = "scene.xml"
 """The scene of a pushed object, beside its MJCF (asset.json → files → "scene")."""
@@ -78,6 +81,18 @@ SCENE_OPTIONS = {"timestep": "0.002", "gravity": "0 0 -9.81", "cone": "elliptic"
 """scene.xml's `<option>`: step [s], gravity [m/s^2] and the friction cone (module docstring)."""
 
 
+SUPPORT_POINT = "_support_point_"
+"""Infix of the support points' geom names (`support_points_m`): BODY_support_point_K."""
+SUPPORT_POINT_RADIUS_M = 1e-3
+"""Radius of a support point's sphere [m]."""
+SUPPORT_POINT_DROP_M = 1e-3
+"""How far a support point's sphere reaches below the collision mesh's lowest point [m]: enough that the mesh
+stays clear of a flat floor under the object's weight (MuJoCo's default contact sinks about 0.2 mm) and
+while a push tilts it, small beside any object's height."""
+_SUPPORT_GRID = 4
+"""Support points per side of the bottom face: the sliding identification's grid (pipelines/identify/sliding.py)."""
+
+
 def _num(values) -> str:
     """Space-separated shortest round-trip decimals."""
     return " ".join(repr(float(v)) for v in np.ravel(values))
@@ -89,6 +104,35 @@ def _mesh_name(rel_path: str) -> str:
 
 def _friction(mu: float) -> dict[str, str]:
     return {"friction": _num((mu, _TORSION_FRICTION, _ROLL_FRICTION)), **CONTACT}
+
+
+def support_model(asset: Asset) -> str | None:
+    """The support a pushed object's identification chose ("uniform" or "corners",
+    asset.json → provenance → identify → support → model), or None: not pushed, or not recorded."""
+    if asset.kind != "sliding":
+        return None
+    identify = (asset.provenance or {}).get("identify", {})
+    return (identify.get("support") or {}).get("model") or identify.get("config", {}).get("support")
+
+
+def support_points_m(asset: Asset, out_dir: Path) -> np.ndarray:
+    """Centres of the support points [n, 3] in the object frame [m]: for a pushed object whose identification
+    chose the "uniform" support, the cell centres of a 4 x 4 grid over the bottom face of the collision
+    meshes' bounding box (world axes at the placement), each a sphere of `SUPPORT_POINT_RADIUS_M` reaching
+    `SUPPORT_POINT_DROP_M` below the lowest vertex; none otherwise ("corners": MuJoCo's mesh-plane contact
+    carries the object at the face's corners by itself). Mesh paths are relative to `out_dir`."""
+    if support_model(asset) != "uniform":
+        return np.zeros((0, 3))
+    import trimesh
+
+    R = asset.placement.rotation_matrix()
+    vertices = np.concatenate([np.asarray(trimesh.load(Path(out_dir) / rel, force="mesh", process=False).vertices,
+                                          dtype=float) for rel in asset.geometry.collision]) @ R.T
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    cells = (np.arange(_SUPPORT_GRID) + 0.5) / _SUPPORT_GRID
+    z = lo[2] - SUPPORT_POINT_DROP_M + SUPPORT_POINT_RADIUS_M
+    world = np.array([(lo[0] + u * (hi[0] - lo[0]), lo[1] + v * (hi[1] - lo[1]), z) for u in cells for v in cells])
+    return world @ R
 
 
 def export_mjcf(asset: Asset, out_dir: Path) -> Path:
@@ -166,6 +210,13 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
     )
     for name in names[1:1 + len(asset.geometry.collision)]:
         ET.SubElement(body, "geom", name=name, type="mesh", mesh=name, group="3", **_friction(mu))
+    support = support_points_m(asset, out_dir)
+    if len(support):
+        body.append(ET.Comment(" support points: the bottom face carries the weight evenly, as the identification "
+                               "assumed (a mesh alone would stand on its corners) "))
+    for k, centre in enumerate(support):
+        ET.SubElement(body, "geom", name=f"{body_name}{SUPPORT_POINT}{k}", type="sphere",
+                      size=repr(SUPPORT_POINT_RADIUS_M), pos=_num(centre), density="0", group="3", **_friction(mu))
 
     if asset.joint is not None and asset.geometry.base:
         # the joint guides the part through the base (a carcass around a drawer): they must not collide
@@ -177,8 +228,9 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
 
 
 def support_height_m(asset: Asset, out_dir: Path) -> float:
-    """World height [m] of the lowest collision-mesh vertex with the object at `asset.placement`: the
-    surface it rests on. Mesh paths in `asset.geometry` are relative to `out_dir`."""
+    """World height [m] of the lowest collision-mesh vertex (or support point's sphere, `support_points_m`)
+    with the object at `asset.placement`: the surface it rests on. Mesh paths in `asset.geometry` are
+    relative to `out_dir`."""
     import trimesh
 
     R, p = asset.placement.rotation_matrix(), np.asarray(asset.placement.position, dtype=float)
@@ -186,6 +238,9 @@ def support_height_m(asset: Asset, out_dir: Path) -> float:
     for rel in asset.geometry.collision:
         vertices = np.asarray(trimesh.load(Path(out_dir) / rel, force="mesh", process=False).vertices, dtype=float)
         lowest.append(float(np.min(vertices @ R[2] + p[2])))
+    support = support_points_m(asset, out_dir)
+    if len(support):  # the support points' spheres reach below the mesh
+        lowest.append(float(np.min(support @ R[2] + p[2])) - SUPPORT_POINT_RADIUS_M)
     return min(lowest)
 
 

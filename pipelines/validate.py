@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from assets import Asset
+from exporters.mjcf import SUPPORT_POINT
 from exporters.names import joint_name, mjcf_name, urdf_name, usd_prim_name
 
 __all__ = ["DEFAULT_TOLERANCE", "LOADERS", "LoaderCheck", "ValidationError", "ValidationReport", "replay_held_mujoco", "replay_pushed_model",
@@ -183,8 +184,12 @@ def _read_mujoco(asset: Asset, path: Path) -> _Reading:
     inertia = R @ np.diag(model.body_inertia[body]) @ R.T
     geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body]
     colliding = [g for g in geoms if model.geom_contype[g] or model.geom_conaffinity[g]]
-    if len(colliding) != len(asset.geometry.collision):
-        raise ValueError(f"expected {len(asset.geometry.collision)} colliding geoms, found {len(colliding)}")
+    # a pushed object's support points (exporters/mjcf.py `support_points_m`) collide beside its meshes
+    support = [g for g in colliding if SUPPORT_POINT in (model.geom(g).name or "")]
+    meshes = [g for g in colliding if g not in support]
+    if len(meshes) != len(asset.geometry.collision):
+        raise ValueError(f"expected {len(asset.geometry.collision)} colliding geoms, found {len(meshes)}"
+                         + (f" beside {len(support)} support points" if support else ""))
     mu = _collision_mu([float(model.geom_friction[g, 0]) for g in colliding], "MuJoCo")
 
     # Step it: proves the model compiles into something that simulates.
@@ -212,7 +217,8 @@ def _read_mujoco(asset: Asset, path: Path) -> _Reading:
         friction=mu,
         position=np.array(model.body_pos[body], dtype=float),
         quaternion_xyzw=np.array([x, y, z, w], dtype=float),
-        notes=(f"stepped {_MJ_STEPS} steps ({t_s:g} s), fell {drop_m:.4g} m",),
+        notes=(f"stepped {_MJ_STEPS} steps ({t_s:g} s), fell {drop_m:.4g} m",)
+        + ((f"{len(support)} support points on the bottom face carry the identified friction",) if support else ()),
     )
 
 
@@ -278,8 +284,10 @@ def _read_mujoco_scene(asset: Asset, path: Path) -> _Reading:
     )
 
 
-def _newton_reading(asset: Asset, builder, *, carries_friction: bool, carries_placement: bool) -> _Reading:
-    """Values from a Newton model finalized on the CPU: what its solvers actually see."""
+def _newton_reading(asset: Asset, builder, *, carries_friction: bool, carries_placement: bool,
+                    support_points: int = 0) -> _Reading:
+    """Values from a Newton model finalized on the CPU: what its solvers actually see. support_points: the
+    colliding spheres the file adds beside the collision meshes (exporters/mjcf.py `support_points_m`)."""
     import newton
 
     model = builder.finalize(device="cpu")
@@ -293,8 +301,10 @@ def _newton_reading(asset: Asset, builder, *, carries_friction: bool, carries_pl
         s for s in range(model.shape_count)
         if shape_body[s] == body and flags[s] & int(newton.ShapeFlags.COLLIDE_SHAPES)
     ]  # fmt: skip
-    if len(colliding) != len(asset.geometry.collision):
-        raise ValueError(f"expected {len(asset.geometry.collision)} colliding shapes, found {len(colliding)}")
+    if len(colliding) != len(asset.geometry.collision) + support_points:
+        raise ValueError(f"expected {len(asset.geometry.collision)} colliding shapes"
+                         + (f" and {support_points} support points" if support_points else "")
+                         + f", found {len(colliding)}")
     notes: list[str] = []
     friction = None
     mu_all = model.shape_material_mu.numpy()
@@ -322,9 +332,12 @@ def _newton_reading(asset: Asset, builder, *, carries_friction: bool, carries_pl
 def _read_newton_mjcf(asset: Asset, path: Path) -> _Reading:
     import newton
 
+    import xml.etree.ElementTree as ET
+
     builder = newton.ModelBuilder()
     builder.add_mjcf(str(path))
-    return _newton_reading(asset, builder, carries_friction=True, carries_placement=True)
+    support = sum(SUPPORT_POINT in g.get("name", "") for g in ET.parse(path).iter("geom"))
+    return _newton_reading(asset, builder, carries_friction=True, carries_placement=True, support_points=support)
 
 
 # --- URDF ---------------------------------------------------------------------------------------

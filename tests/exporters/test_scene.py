@@ -21,8 +21,9 @@ TABLE_Z_M = 0.7
 G = 9.81
 
 
-def pushed_asset(out_dir: Path, name: str = "plate", mu: float = MU) -> Asset:
-    """A box resting on a table at TABLE_Z_M, turned about z at its placement; two convex halves."""
+def pushed_asset(out_dir: Path, name: str = "plate", mu: float = MU, support: str | None = None) -> Asset:
+    """A box resting on a table at TABLE_Z_M, turned about z at its placement; two convex halves; `support`:
+    the support model its identification chose (asset.json provenance), None: not recorded."""
     meshes = out_dir / "meshes"
     meshes.mkdir(parents=True, exist_ok=True)
     trimesh.creation.box(extents=2 * HALF_M).export(meshes / "visual.obj")
@@ -38,7 +39,8 @@ def pushed_asset(out_dir: Path, name: str = "plate", mu: float = MU) -> Asset:
     placement = Pose((0.2, -0.1, TABLE_Z_M + HALF_M[2]), tuple(Rotation.from_euler("z", 0.4).as_quat()))
     return Asset(name=name, kind="sliding", placement=placement, theta=theta,
                  geometry=Geometry("meshes/visual.obj", ("meshes/collision_000.obj", "meshes/collision_001.obj")),
-                 material=Material("steel", 7850.0, mu))
+                 material=Material("steel", 7850.0, mu),
+                 provenance={"identify": {"support": {"model": support}}} if support else {})
 
 
 def _scene(tmp_path: Path, **kwargs):
@@ -105,6 +107,35 @@ def test_plane_is_under_the_object_with_the_same_friction(tmp_path: Path):
     _rest(model, data)
     assert np.linalg.norm(data.xpos[body] - p0) < 1e-3
     assert data.ncon >= 4  # resting on its face, not on an edge
+
+
+@pytest.mark.parametrize("support", ["uniform", "corners"])
+def test_the_chosen_support_carries_the_object(tmp_path: Path, support: str):
+    """"uniform": 16 support points (spheres on the bottom face, carrying mu) hold the object, its mesh clear
+    of the plane; "corners": the mesh alone, standing on its corners. Both rest still and pass validation in
+    MuJoCo and Newton."""
+    import mujoco
+
+    from pipelines.validate import validate_exports
+
+    asset = pushed_asset(tmp_path, support=support)
+    paths = export_all(asset, tmp_path)
+    model = mujoco.MjModel.from_xml_path(str(paths.scene))
+    data = mujoco.MjData(model)
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "plate")
+    spheres = [g for g in range(model.ngeom)
+               if model.geom_bodyid[g] == body and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE]
+    assert len(spheres) == (16 if support == "uniform" else 0)
+    assert {float(model.geom_friction[g, 0]) for g in spheres} <= {MU}
+    _rest(model, data)
+    touching = {int(g) for c in data.contact[:data.ncon] for g in (c.geom1, c.geom2) if model.geom_bodyid[g] == body}
+    if support == "uniform":
+        assert touching == set(spheres)  # the mesh stays clear: the points alone carry the weight
+        assert float(model.body_mass[body]) == pytest.approx(MASS_KG)
+    else:
+        assert touching and not touching & set(spheres)
+    report = validate_exports(asset, tmp_path, paths.to_json(relative_to=tmp_path))
+    assert all(c.ok for c in report.checks), [c.to_json() for c in report.checks if not c.ok]
 
 
 @pytest.mark.parametrize("angle_rad", [0.0, np.pi / 4, 2.0])
