@@ -20,10 +20,8 @@ identified mu:
 - `friction="mu 0.005 0.0001"`: only the sliding coefficient is identified;
   torsional and rolling keep MuJoCo's defaults (inactive at condim 3).
 - `condim="3"`: normal plus isotropic sliding friction. The moment that resists
-  a pushed object's turning comes from sliding friction at its support contacts
-  (MuJoCo puts them at the corners of a flat convex face, which resists turning
-  more than a uniformly loaded face: pipelines/identify/sliding.py); condim 4's
-  torsional friction would add to it, with a coefficient nobody measured.
+  a pushed object's turning comes from sliding friction at its support contacts;
+  condim 4's torsional friction would add to it, with a coefficient nobody measured.
 - `solref="0.02 1"`, `solimp="0.9 0.95 0.001 0.5 2"`: MuJoCo's defaults, written
   so a reader sees them and another scene's `<default>` cannot change them
   silently. A time constant of 0.02 s is critically damped and needs a step of
@@ -38,6 +36,17 @@ identified mu:
   advice for elliptic cones) 0.04 mm, with sliding acceleration within 0.5 % of
   (F - mu m g) / m either way. These are scene options (MJCF has no per-body
   cone), so the object's own file keeps MuJoCo's defaults there.
+
+Support contacts. MuJoCo's mesh-plane (and box-plane) collision carries a flat
+face at its corners, which resists turning about twice as much as an evenly
+loaded face. The sliding identification chooses between the two from the pushes
+(pipelines/identify/sliding.py `choose_support`, asset.json → provenance →
+identify → support), and the export reproduces its choice (`support_points_m`):
+"corners", the collision meshes alone; "uniform", 16 support points in NAME.xml,
+spheres of 1 mm radius on a 4 x 4 grid over the bottom face (the
+identification's grid), reaching 1 mm below the mesh so that they alone touch a
+flat floor, carrying mu and the contact attributes, massless. Newton's MJCF
+importer reads them as the same spheres; URDF and USD carry the meshes alone.
 
 Friction of a pair: MuJoCo takes the larger of the two geoms' coefficients,
 Newton's SemiImplicit solver and PhysX their mean. The identified mu is the

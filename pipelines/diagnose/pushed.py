@@ -1,9 +1,12 @@
 """Diagnose a pushed object: what does the sliding model leave out?
 
-The sliding base model (pipelines/identify/sliding.py) is Coulomb friction of a
-uniformly loaded support face, driven by the measured pusher force (less the
-offset measured at the recording's zeros) at the measured contact point. Its
-candidates, each a term of the same Newton rollout:
+The sliding base model (pipelines/identify/sliding.py) is Coulomb friction of the
+support face, loaded as `SlidingConfig.support` says (uniformly, or at its
+corners: the build passes the support the identification chose from the pushes,
+so that a corner-carried object's extra turning resistance is not read as
+turning damping), driven by the measured pusher force (less the offset measured
+at the recording's zeros) at the measured contact point. Its candidates, each a
+term of the same Newton rollout:
 
   sensor_bias:     a force offset still in the reading after the zeros
                    (a drift, a load that depends on the arm's pose), world x, y
