@@ -115,19 +115,17 @@ def _friction_probe(entry: dict, r: dict) -> np.ndarray:
     return (np.sign(qd) * acts)[:, None]
 
 
-def _friction_map_predicts_better(rows: list[dict], eval_rows: dict, state, names, config, v_s: float) -> bool:
-    """Whether the base model plus the localised frictions of `state` predicts the evaluation effort better
-    (residual sum of squares, least squares on the training rows) than the base model plus `names`."""
-    def heldout_rss(extra) -> float:
-        X = np.concatenate([np.vstack([r["columns"] for r in rows])] + [np.vstack([f(r) for r in rows])
-                                                                        for f in extra], 1)
-        coef, *_ = np.linalg.lstsq(X, np.concatenate([r["tau"] for r in rows]), rcond=None)
-        res = eval_rows["tau"] - np.concatenate([eval_rows["columns"]] + [f(eval_rows) for f in extra], 1) @ coef
-        return float(res @ res)
-
-    effect = [lambda r, c=c: joint_effect_columns(c, r, config, v_s) for c in names]
-    probe = [lambda r, u=u: _friction_probe(u, r) for u in state]
-    return heldout_rss(probe) < heldout_rss(effect)
+def _spring_stands_for_friction(identified, names, state, q: np.ndarray) -> bool:
+    """Whether a chosen spring only stands in for a friction that depends on the direction of motion: such a
+    friction is, while the part moves, a constant force on top of the Coulomb one, which a spring mimics with a
+    stiffness of the wrong sign (pushing away from its rest position) or a rest position far outside the
+    travel seen (k q0 the constant, k q small). A door closer or a soft-close spring does neither."""
+    if "spring" not in names or not any("qd" in u["where"] for u in state):
+        return False
+    params = joint_effect_params("spring", identified)
+    span = float(q.max() - q.min())
+    outside = max(float(q.min()) - params["q0"], params["q0"] - float(q.max()), 0.0)
+    return params["k"] <= 0 or outside > span
 
 
 def replay_fit(joint, q_sim: np.ndarray, windows) -> FitMetrics:
@@ -270,13 +268,13 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
                      if u["share"] >= 0.1)
 
     # a friction that depends on position or direction is no candidate: when the base model's residual shows
-    # one and the chosen effect leaves it there, the effect only bent itself to it (a spring fitted to a runner
-    # that catches one way): no effect is reported, the mismatch goes to unexplained and the body's values it
-    # corrupts are flagged
+    # one and the chosen effect leaves it there, or is a spring that only stands in for it (a runner that
+    # catches one way), the effect only bent itself to it: no effect is reported, the mismatch goes to
+    # unexplained and the body's values it corrupts are flagged
     state = friction_map(r_before)
     if best:
         after_state = friction_map(r_after)
-        if state and (after_state or _friction_map_predicts_better(rows, eval_rows, state, best, jconfig, v_s)):
+        if state and (after_state or _spring_stands_for_friction(final, best, state, eval_rows["q"])):
             best, state, effects = (), after_state or state, []
             q_after, final, r_after = q_before, base_fit, r_before
             fits = {"before": fits["before"], "after": fits["before"]}
