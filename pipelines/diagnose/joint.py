@@ -104,17 +104,6 @@ def _time_blocks(recording, blocks: int = 2) -> list:
             for a, b in zip(edges[:-1], edges[1:])]
 
 
-def _friction_probe(entry: dict, r: dict) -> np.ndarray:
-    """An unexplained entry's friction as an effort column [N, 1]: sign(q') where it acts."""
-    qd = r["qd"]
-    if "q" in entry["where"]:
-        a, b = entry["where"]["q"]
-        acts = (r["q"] >= a) & (r["q"] <= b)
-    else:
-        acts = np.sign(qd) == (1.0 if entry["where"]["qd"][0] >= 0 else -1.0)
-    return (np.sign(qd) * acts)[:, None]
-
-
 def _spring_stands_for_friction(identified, names, state, q: np.ndarray) -> bool:
     """Whether a chosen spring only stands in for a friction that depends on the direction of motion: such a
     friction is, while the part moves, a constant force on top of the Coulomb one, which a spring mimics with a
