@@ -208,7 +208,7 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
     )
     from pipelines.validate import validate_exports
     from pipelines.priors import part_pseudo_inertias
-    from twin.summary import bounds_flags, dominated_flags
+    from twin.summary import bounds_flags, doubtful_flags, dominated_flags
 
     diagnosis, dominated = None, set()
     if detection.kind == "sliding":
@@ -300,7 +300,8 @@ def _build_body(config, trials, holdout, detection, mesh_object, placement, part
             fit=fit,
             effects=diagnosis.effects if diagnosis else (),
             unexplained=diagnosis.unexplained if diagnosis else (),
-            flags=bounds_flags(theta, prior.lower, prior.upper) + dominated_flags(dominated),
+            flags=(bounds_flags(theta, prior.lower, prior.upper) + dominated_flags(dominated)
+                   + doubtful_flags(diagnosis.doubtful if diagnosis else ())),
             # the exporters read the identification's choices from it (a pushed object's support)
             provenance=identify_provenance,
         )
@@ -509,6 +510,8 @@ def _log_diagnosis(diagnosis, log) -> None:
         log(f"  no effect improves the held-out prediction, {1000 * fits['after'].rmse_position_m:.3f} mm{floor}")
     for u in diagnosis.unexplained:
         log(f"  unexplained: {u['summary']}")
+    if diagnosis.doubtful:
+        log(f"  doubtful (a mismatch may have corrupted them): {', '.join(diagnosis.doubtful)}")
 
 
 @dataclass(frozen=True)

@@ -204,7 +204,7 @@ class Bench:
     jointed_only: bool = False
     """paper: only the drawer, cabinet door and oven door."""
     engine: Literal["newton", "mujoco", "both"] = "both"
-    """paper, push: the simulator that makes the recordings: twin's own Newton models (those identification fits),
+    """paper, push, diagnose: the simulator that makes the recordings: twin's own Newton models (those identification fits),
     MuJoCo (a PD-servoed robot; it follows the same references only as closely as its servos do), or both,
     one row each; a target is met when it holds on every engine."""
     concealed: int = 40

@@ -71,7 +71,7 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
     from pipelines.validate import replay_jointed_mujoco, validate_jointed_exports
 
     from .build import _log_diagnosis, _write_meshes, kind_hint, log_summary, weighed_where_prior
-    from .summary import bounds_flags, extent_flags
+    from .summary import bounds_flags, doubtful_flags, extent_flags
     from .output import staged_output
 
     fit = detection.joint
@@ -122,7 +122,8 @@ def build_jointed(config, trials, holdout, detection, mesh_object, placement, pa
                     metrics(held[identified.selected]), jconfig.window_s) if held else None,
             effects=diagnosis.effects if diagnosis else (),
             unexplained=diagnosis.unexplained if diagnosis else (),
-            flags=bounds_flags(theta, prior.lower, prior.upper) + extent_flags(scan_stats.get("extent")),
+            flags=(bounds_flags(theta, prior.lower, prior.upper) + extent_flags(scan_stats.get("extent"))
+                   + doubtful_flags(diagnosis.doubtful if diagnosis else ())),
         )
         paths = timer.run("export", export_all, asset, tmp)
         files = {**paths.to_json(relative_to=tmp), **({"report": "report.html"} if identified.traces else {})}

@@ -17,6 +17,14 @@ def dominated_flags(dominated: set) -> tuple[dict, ...]:
              "values are mostly the geometry prior's", "components": sorted(dominated)},)
 
 
+def doubtful_flags(doubtful) -> tuple[dict, ...]:
+    """The parameters a mismatch the diagnosis could not explain may have corrupted (`Diagnosis.doubtful`)."""
+    if not doubtful:
+        return ()
+    return ({"parameter": "diagnosis", "problem": "doubtful: a mismatch no candidate explains may have corrupted "
+             "these; they are not to be taken as measured", "components": sorted(doubtful)},)
+
+
 def bounds_flags(theta, lower, upper) -> tuple[dict, ...]:
     """A measured mass or principal moment outside the geometry prior's bounds C.
 

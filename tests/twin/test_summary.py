@@ -8,7 +8,7 @@ from assets import Estimate, Inertial, Theta
 from pipelines.identify import with_weighed_mass
 from pipelines.priors import estimate_prior
 from twin.build import weighed_where_prior
-from twin.summary import bounds_flags, summary_lines
+from twin.summary import bounds_flags, doubtful_flags, dominated_flags, summary_lines
 
 
 def _theta(mass: float, source: str = "measured") -> Theta:
@@ -59,3 +59,14 @@ def test_a_measured_mass_outside_the_prior_is_flagged_and_said():
     assert "measured: mass" in lines and "prior: friction" in lines
     assert any("'EPS foam' read as foam_polystyrene" in line for line in lines)
     assert lines[-1].startswith("FLAG: mass 43 kg is outside")
+
+
+def test_what_the_recordings_left_to_the_prior_or_a_mismatch_corrupted_is_flagged_and_said():
+    assert dominated_flags(set()) == () and doubtful_flags(()) == ()
+    flags = dominated_flags({"Ixz", "Ixy"}) + doubtful_flags(("mass", "friction"))
+    doc = {"theta": {"mass": {"source": "measured"}}, "flags": list(flags),
+           "provenance": {"identify": {"selected": "posterior", "choice": "posterior: no held-out recording"}}}
+    lines = summary_lines(doc)
+    assert lines[0] == "kept the posterior: no held-out recording"
+    assert lines[-2].startswith("FLAG: inertial: prior-dominated") and lines[-2].endswith("(Ixy, Ixz)")
+    assert lines[-1].startswith("FLAG: diagnosis: doubtful") and lines[-1].endswith("(friction, mass)")
