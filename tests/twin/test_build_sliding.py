@@ -45,6 +45,12 @@ def test_build_sliding_measures_friction_and_marks_the_mass_prior(tmp_path):
     assert all(check["ok"] for check in asset["provenance"]["validation"]["checks"])
     assert asset["provenance"]["identify"]["kind"] == "sliding"
     assert asset["provenance"]["identify"]["friction_from"] == "sliding fit"  # a push that slides in the simulation
+    # the support model the pushes chose (an evenly loaded face: each half of the push predicts the other
+    # better with it), used by the diagnosis and reproduced by the export as 16 support points
+    support = asset["provenance"]["identify"]["support"]
+    assert support["model"] == "uniform" and support["chosen_by"] == "trial halves" and support["why"]
+    assert asset["provenance"]["identify"]["config"]["support"] == "uniform"
+    assert (out / asset["files"]["mjcf"]).read_text().count("_support_point_") == 16
     # the diagnosis ran (each half of the push fitted on the other) and, the push being clean, found nothing
     assert asset["effects"] == [] and asset["provenance"]["diagnose"]["evaluation"] == "time-blocked cross-validation"
 
