@@ -74,28 +74,30 @@ class MujocoSettings:
             raise ValueError(f"MujocoSettings.integrator: expected one of {INTEGRATORS}, got {self.integrator!r}")
 
 
-def _num(x) -> str:
-    return " ".join(repr(float(v)) for v in np.atleast_1d(x))
+def mjcf_vec(x) -> str:
+    """Numbers as an MJCF attribute: space-separated, at full precision."""
+    return " ".join(repr(float(v)) for v in np.ravel(x))
 
 
-def _wxyz(quat_xyzw) -> str:
+def mjcf_quat(quat_xyzw) -> str:
+    """A quaternion (x, y, z, w) as MJCF's w x y z."""
     x, y, z, w = quat_xyzw
-    return _num([w, x, y, z])
+    return mjcf_vec([w, x, y, z])
 
 
 def _full_inertia(I: np.ndarray) -> str:
-    return _num([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
+    return mjcf_vec([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
 
 
 def _servo_body_xml(name: str, position, settings: MujocoSettings, children: str) -> str:
     """A body with world axes at `position` [m] on the six SERVO_AXES joints, with `children` inside."""
     joints = "".join(
-        f'<joint name="{name}_{a}" type="{"slide" if a[0] == "t" else "hinge"}" axis="{_num(np.eye(3)[i % 3])}"/>'
+        f'<joint name="{name}_{a}" type="{"slide" if a[0] == "t" else "hinge"}" axis="{mjcf_vec(np.eye(3)[i % 3])}"/>'
         for i, a in enumerate(SERVO_AXES)
     )
     inertia = settings.wrist_inertia_kg_m2
-    return (f'<body name="{name}" pos="{_num(position)}">{joints}'
-            f'<inertial pos="0 0 0" mass="{settings.wrist_mass_kg!r}" diaginertia="{_num([inertia] * 3)}"/>'
+    return (f'<body name="{name}" pos="{mjcf_vec(position)}">{joints}'
+            f'<inertial pos="0 0 0" mass="{settings.wrist_mass_kg!r}" diaginertia="{mjcf_vec([inertia] * 3)}"/>'
             f'{children}</body>')
 
 
@@ -109,7 +111,7 @@ def _model_xml(settings: MujocoSettings, control_rate_hz: float, worldbody: str,
     if timestep > 1e-3 + 1e-12:
         raise ValueError(f"MuJoCo time step {timestep:.3g} s exceeds 1 ms: raise MujocoSettings.substeps")
     return (f'<mujoco><compiler angle="radian" autolimits="true"/>'
-            f'<option timestep="{timestep!r}" gravity="{_num(GRAVITY_M_S2)}" integrator="{settings.integrator}"/>'
+            f'<option timestep="{timestep!r}" gravity="{mjcf_vec(GRAVITY_M_S2)}" integrator="{settings.integrator}"/>'
             f'<worldbody>{worldbody}</worldbody>{extra}</mujoco>')
 
 
@@ -274,9 +276,9 @@ def simulate_held_mujoco(
     # the object body hangs from the wrist, whose frame has world axes at the grasp origin
     obj_pos = np.asarray(placement.position) - p_grasp0
     I = truth.inertia_matrix()
-    obj = (f'<body name="object" pos="{_num(obj_pos)}" quat="{_wxyz(placement.quaternion_xyzw)}">'
-           f'<inertial pos="{_num(truth.com)}" mass="{truth.mass!r}" fullinertia="{_full_inertia(I)}"/>'
-           f'<site name="grasp" pos="{_num(grasp.position)}" quat="{_wxyz(grasp.quaternion_xyzw)}"/></body>')
+    obj = (f'<body name="object" pos="{mjcf_vec(obj_pos)}" quat="{mjcf_quat(placement.quaternion_xyzw)}">'
+           f'<inertial pos="{mjcf_vec(truth.com)}" mass="{truth.mass!r}" fullinertia="{_full_inertia(I)}"/>'
+           f'<site name="grasp" pos="{mjcf_vec(grasp.position)}" quat="{mjcf_quat(grasp.quaternion_xyzw)}"/></body>')
     xml = _model_xml(settings, config.control_rate_hz, _servo_body_xml("wrist", p_grasp0, settings, obj),
                      f'<actuator>{_servo_actuators_xml("wrist")}</actuator>'
                      '<sensor><force name="ft_force" site="grasp"/><torque name="ft_torque" site="grasp"/></sensor>')
@@ -404,15 +406,15 @@ def simulate_jointed_mujoco(
     p_handle0 = np.asarray(X_handle0.position)
     I = inertial.inertia_matrix()
 
-    part = (f'<body name="part" pos="{_num(placement.position)}" quat="{_wxyz(placement.quaternion_xyzw)}">'
+    part = (f'<body name="part" pos="{mjcf_vec(placement.position)}" quat="{mjcf_quat(placement.quaternion_xyzw)}">'
             f'<joint name="part_joint" type="{"hinge" if revolute else "slide"}" '
-            f'pos="{_num(placement.inverse().matrix()[:3] @ np.append(origin, 1.0))}" '
-            f'axis="{_num(placement.rotation_matrix().T @ axis)}" {_joint_passive_xml(obj, effect)}/>'
-            f'<inertial pos="{_num(inertial.com)}" mass="{inertial.mass!r}" fullinertia="{_full_inertia(I)}"/>'
-            f'<site name="handle" pos="{_num(handle.position)}" quat="{_wxyz(handle.quaternion_xyzw)}"/></body>')
-    gripper = (f'<body name="gripper" quat="{_wxyz(X_handle0.quaternion_xyzw)}">'
+            f'pos="{mjcf_vec(placement.inverse().matrix()[:3] @ np.append(origin, 1.0))}" '
+            f'axis="{mjcf_vec(placement.rotation_matrix().T @ axis)}" {_joint_passive_xml(obj, effect)}/>'
+            f'<inertial pos="{mjcf_vec(inertial.com)}" mass="{inertial.mass!r}" fullinertia="{_full_inertia(I)}"/>'
+            f'<site name="handle" pos="{mjcf_vec(handle.position)}" quat="{mjcf_quat(handle.quaternion_xyzw)}"/></body>')
+    gripper = (f'<body name="gripper" quat="{mjcf_quat(X_handle0.quaternion_xyzw)}">'
                f'<site name="ft" pos="0 0 0"/></body>')
-    weld = (f'<equality><weld body1="gripper" body2="part" anchor="{_num(handle.position)}" '
+    weld = (f'<equality><weld body1="gripper" body2="part" anchor="{mjcf_vec(handle.position)}" '
             f'solref="{settings.weld_time_constant_s!r} 1"/></equality>')
     xml = _model_xml(settings, config.control_rate_hz, part + _servo_body_xml("hand", p_handle0, settings, gripper),
                      weld + f'<actuator>{_servo_actuators_xml("hand")}</actuator>'

@@ -49,7 +49,7 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .mujoco_engine import INTEGRATORS, MujocoSettings
+from .mujoco_engine import INTEGRATORS, MujocoSettings, mjcf_vec, mjcf_quat
 from .push import GRAVITY_M_S2, PushConfig, PushTruth
 
 __all__ = ["PUSH_WRENCH_FRAMES", "PushContact", "make_pushed_sample", "push_settings", "pusher_reference",
@@ -104,15 +104,6 @@ class PushContact:
             raise ValueError(f"PushContact.cone: expected 'elliptic' or 'pyramidal', got {self.cone!r}")
 
 
-def _num(x) -> str:
-    return " ".join(repr(float(v)) for v in np.ravel(x))
-
-
-def _wxyz(quat_xyzw) -> str:
-    x, y, z, w = quat_xyzw
-    return _num([w, x, y, z])
-
-
 def _sensor_rotation(sensor_yaw_rad: float) -> Rotation:
     """The F/T sensor's axes in world: turned about z, then flipped about x (its z looks down the tool)."""
     return Rotation.from_euler("z", sensor_yaw_rad) * Rotation.from_euler("x", np.pi)
@@ -136,7 +127,7 @@ def pusher_reference(config: PushConfig, t: np.ndarray) -> np.ndarray:
 def _box_mesh_xml(half_extents_m) -> str:
     hx, hy, hz = half_extents_m
     corners = np.array([[sx * hx, sy * hy, sz * hz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    return f'<mesh name="block" vertex="{_num(corners)}"/>'
+    return f'<mesh name="block" vertex="{mjcf_vec(corners)}"/>'
 
 
 def pushed_block_xml(config: PushConfig, settings: MujocoSettings, contact: PushContact, *,
@@ -153,26 +144,26 @@ def pushed_block_xml(config: PushConfig, settings: MujocoSettings, contact: Push
     for name, tc in (("solref", contact.solref[0]), ("tip_solref", contact.tip_solref[0])):
         if tc < 2 * timestep:
             raise ValueError(f"PushContact.{name} time constant {tc:g} s is under two steps ({timestep:g} s)")
-    friction = _num((config.mu, contact.torsional_friction, contact.rolling_friction))
-    surface = (f'friction="{friction}" condim="{contact.condim}" solref="{_num(contact.solref)}" '
-               f'solimp="{_num(contact.solimp)}"')
+    friction = mjcf_vec((config.mu, contact.torsional_friction, contact.rolling_friction))
+    surface = (f'friction="{friction}" condim="{contact.condim}" solref="{mjcf_vec(contact.solref)}" '
+               f'solimp="{mjcf_vec(contact.solimp)}"')
     # contype/conaffinity bits: table 1, block 1|2, tip 2: the tip touches the block, never the table
     assets = ""
     if contact.shape == "box":
-        geom = f'<geom name="block" type="box" size="{_num((hx, hy, hz))}" density="0" {surface} contype="3" ' \
+        geom = f'<geom name="block" type="box" size="{mjcf_vec((hx, hy, hz))}" density="0" {surface} contype="3" ' \
                f'conaffinity="3"/>'
     elif contact.shape == "grid":
         radius = 5e-4
         cells = (np.arange(contact.grid) + 0.5) / contact.grid * 2.0 - 1.0
-        geom = f'<geom name="block" type="box" size="{_num((hx, hy, hz))}" density="0" contype="2" conaffinity="2"/>'
-        geom += "".join(f'<geom type="sphere" size="{radius!r}" pos="{_num((gx * hx, gy * hy, -hz + radius))}" '
+        geom = f'<geom name="block" type="box" size="{mjcf_vec((hx, hy, hz))}" density="0" contype="2" conaffinity="2"/>'
+        geom += "".join(f'<geom type="sphere" size="{radius!r}" pos="{mjcf_vec((gx * hx, gy * hy, -hz + radius))}" '
                         f'density="0" {surface} contype="1" conaffinity="1"/>' for gx in cells for gy in cells)
     else:
         geom = f'<geom name="block" type="mesh" mesh="block" density="0" {surface} contype="3" conaffinity="3"/>'
         assets = f"<asset>{_box_mesh_xml(config.half_extents_m)}</asset>"
     q0 = Rotation.from_euler("z", config.yaw0_rad).as_quat()
-    block = (f'<body name="block" pos="{_num((0.0, 0.0, hz))}" quat="{_wxyz(q0)}"><freejoint name="block_free"/>'
-             f'<inertial pos="0 0 0" mass="{m!r}" diaginertia="{_num(inertia)}"/>{geom}</body>')
+    block = (f'<body name="block" pos="{mjcf_vec((0.0, 0.0, hz))}" quat="{mjcf_quat(q0)}"><freejoint name="block_free"/>'
+             f'<inertial pos="0 0 0" mass="{m!r}" diaginertia="{mjcf_vec(inertia)}"/>{geom}</body>')
     world = f'<geom name="table" type="plane" size="0 0 0.05" {surface} contype="1" conaffinity="1"/>' + block
     extra = ""
     if pusher:
@@ -182,12 +173,12 @@ def pushed_block_xml(config: PushConfig, settings: MujocoSettings, contact: Push
         kp, kv = carriage * w * w, 2.0 * carriage * w
         r = config.tip_radius_m
         # priority 1: the pair takes the tip's condim 1 (no friction) and its solref
-        world += (f'<body name="carriage" pos="{_num((*start, hz))}">'
+        world += (f'<body name="carriage" pos="{mjcf_vec((*start, hz))}">'
                   '<joint name="pusher_x" type="slide" axis="1 0 0"/><joint name="pusher_y" type="slide" axis="0 1 0"/>'
-                  f'<inertial pos="0 0 0" mass="{carriage!r}" diaginertia="{_num([settings.wrist_inertia_kg_m2] * 3)}"/>'
-                  f'<body name="tip" quat="{_wxyz(_sensor_rotation(sensor_yaw_rad).as_quat())}">'
-                  f'<site name="ft"/><geom name="tip" type="capsule" size="{_num((r, contact.tip_half_length_m))}" '
-                  f'density="0" condim="1" priority="1" solref="{_num(contact.tip_solref)}" contype="2" '
+                  f'<inertial pos="0 0 0" mass="{carriage!r}" diaginertia="{mjcf_vec([settings.wrist_inertia_kg_m2] * 3)}"/>'
+                  f'<body name="tip" quat="{mjcf_quat(_sensor_rotation(sensor_yaw_rad).as_quat())}">'
+                  f'<site name="ft"/><geom name="tip" type="capsule" size="{mjcf_vec((r, contact.tip_half_length_m))}" '
+                  f'density="0" condim="1" priority="1" solref="{mjcf_vec(contact.tip_solref)}" contype="2" '
                   'conaffinity="2"/></body></body>')
         extra = (f'<actuator><position name="pusher_x" joint="pusher_x" kp="{kp!r}" kv="{kv!r}"/>'
                  f'<position name="pusher_y" joint="pusher_y" kp="{kp!r}" kv="{kv!r}"/></actuator>'
@@ -219,8 +210,6 @@ def simulate_pushed_mujoco(config: PushConfig, settings: MujocoSettings | None =
     site = model.site("ft").id
     sensor = model.sensor("ft_force")
     adr = int(sensor.adr[0])
-    joints = [model.joint(n) for n in ("pusher_x", "pusher_y")]
-    qadr = np.array([int(j.qposadr[0]) for j in joints])
     actuators = np.array([model.actuator(n).id for n in ("pusher_x", "pusher_y")])
     kv_over_kp = model.actuator_biasprm[actuators[0], 2] / model.actuator_biasprm[actuators[0], 1]
     start = pusher_reference(config, np.zeros(1))[0]

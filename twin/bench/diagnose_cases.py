@@ -136,28 +136,34 @@ def make_cases(concealed: int, clean: int, seed: int) -> list[Case]:
     return cases
 
 
-def record_case(case: Case, directory: Path, duration_s: float):
-    """Simulate the case's trial and held-out recordings into `directory`; returns (trial, holdout, prior,
-    X_tracked_body) as `diagnose_held` takes them."""
+def free_case_body(case: Case):
+    """(uniform-density prior, true body, placement, grasp) of a free case: a 4 cm, 20 g cube or a 5 cm, 50 g
+    sphere held at its top, its COM shifted by a concealed `nonuniform_density`."""
     import trimesh
 
     from assets import Inertial, Pose
+
+    mass, mesh = ((0.02, trimesh.creation.box((0.04,) * 3)) if case.shape == "cube"
+                  else (0.05, trimesh.creation.icosphere(subdivisions=3, radius=0.025)))
+    mesh.density = mass / mesh.volume
+    uniform = Inertial(mass, (0.0, 0.0, 0.0), np.asarray(mesh.moment_inertia))
+    truth = uniform
+    if case.effect is not None and case.effect.name == "nonuniform_density":
+        truth = replace(uniform, com=tuple(case.effect.params["com_shift"]))
+    placement = Pose((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))
+    return uniform, truth, placement, Pose((0.0, 0.0, float(mesh.bounds[1, 2])), (1.0, 0.0, 0.0, 0.0))
+
+
+def record_case(case: Case, directory: Path, duration_s: float):
+    """Simulate the case's trial and held-out recordings into `directory`; returns (trial, holdout, prior,
+    X_tracked_body) as `diagnose_held` takes them."""
     from pipelines.logs import PoseTrack, WrenchTrack, read_recording
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
     from pipelines.synth.recording import write_recording
 
     rng = np.random.default_rng(case.seed)
-    mass, mesh = ((0.02, trimesh.creation.box((0.04,) * 3)) if case.shape == "cube"
-                  else (0.05, trimesh.creation.icosphere(subdivisions=3, radius=0.025)))
-    mesh.density = mass / mesh.volume
-    uniform = Inertial(mass, (0.0, 0.0, 0.0), np.asarray(mesh.moment_inertia))
     effect = case.effect
-    truth = uniform
-    if effect is not None and effect.name == "nonuniform_density":
-        truth = replace(uniform, com=tuple(effect.params["com_shift"]))
-    placement = Pose((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))
-    top = float(mesh.bounds[1, 2])
-    grasp = Pose((0.0, 0.0, top), (1.0, 0.0, 0.0, 0.0))
+    uniform, truth, placement, grasp = free_case_body(case)
     motion_config = HeldMotionConfig(duration_s=duration_s, substeps=4)
     out = []
     for name in ("trial", "heldout"):
@@ -318,24 +324,13 @@ def make_mujoco_cases(concealed: int, clean: int, seed: int) -> list[Case]:
 
 def record_mujoco_case(case: Case, directory: Path, duration_s: float):
     """`record_case` with MuJoCo's robot (`simulate_held_mujoco`), the wrench in `case.wrench_frame`."""
-    import trimesh
-
-    from assets import Inertial, Pose
     from pipelines.logs import read_recording
     from pipelines.synth.held import HeldMotionConfig, SensorNoise
     from pipelines.synth.mujoco_engine import simulate_held_mujoco, write_motion_recording
 
     rng = np.random.default_rng(case.seed)
-    mass, mesh = ((0.02, trimesh.creation.box((0.04,) * 3)) if case.shape == "cube"
-                  else (0.05, trimesh.creation.icosphere(subdivisions=3, radius=0.025)))
-    mesh.density = mass / mesh.volume
-    uniform = Inertial(mass, (0.0, 0.0, 0.0), np.asarray(mesh.moment_inertia))
     effect = case.effect
-    truth = uniform
-    if effect is not None and effect.name == "nonuniform_density":
-        truth = replace(uniform, com=tuple(effect.params["com_shift"]))
-    placement = Pose((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))
-    grasp = Pose((0.0, 0.0, float(mesh.bounds[1, 2])), (1.0, 0.0, 0.0, 0.0))
+    uniform, truth, placement, grasp = free_case_body(case)
     body_effect = effect if effect is not None and effect.name in ("viscous_damping", "quadratic_drag") else None
     out = []
     for name in ("trial", "heldout"):
