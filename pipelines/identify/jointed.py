@@ -38,9 +38,9 @@ from pipelines.sim.joint import (
     GRAVITY_M_S2,
     JOINT_EFFECT_SIZE,
     add_jointed_part,
+    apply_joint_effort_and_passive_forces,
     joint_dynamics,
     joint_turns,
-    passive_joint_force,
 )
 
 from .kind import JointFit, joint_coordinates
@@ -198,29 +198,6 @@ def _concat(parts: list[_Windows]) -> _Windows:
                     np.concatenate([p.effort for p in parts], 1))
 
 
-@wp.kernel
-def apply_window_effort_and_passive_forces(
-    effort: wp.array2d[float],
-    step: int,
-    window_count: int,
-    friction: wp.array[float],
-    effect: wp.array2d[float],
-    dynamics: wp.array[wp.vec3],
-    turns: float,
-    dt: float,
-    smoothing: float,
-    joint_q: wp.array[float],
-    joint_qd: wp.array[float],
-    joint_f: wp.array[float],
-):
-    """Generalized force [N or N m] of world w: its window's measured effort, held over the step of dt [s], plus
-    the joint's passive forces (`pipelines.sim.joint.passive_joint_force`)."""
-    w = wp.tid()
-    tau = effort[step, w % window_count]
-    joint_f[w] = tau + passive_joint_force(joint_q[w], joint_qd[w], tau, friction[w], effect, w, dynamics[w], turns,
-                                           dt, smoothing)
-
-
 class _Rollout:
     """V parameter variants x W windows, each a one-joint articulation in one Featherstone model."""
 
@@ -274,7 +251,7 @@ class _Rollout:
         out = np.zeros((S + 1, self.V * W))
         out[0] = s0.joint_q.numpy()
         for step in range(S * w.substeps):
-            wp.launch(apply_window_effort_and_passive_forces, dim=self.V * W,
+            wp.launch(apply_joint_effort_and_passive_forces, dim=self.V * W,
                       inputs=[self.effort, step, W, self.friction, self.effect, self.dynamics,
                               joint_turns(self.joint.type), w.dt_s, self.smoothing, s0.joint_q, s0.joint_qd],
                       outputs=[self.control.joint_f], device=self.device)

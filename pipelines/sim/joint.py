@@ -69,7 +69,9 @@ def passive_joint_force(q: float, qd: float, effort: float, friction: float, eff
 
 @wp.kernel
 def apply_joint_effort_and_passive_forces(
-    effort: wp.array[float],
+    effort: wp.array2d[float],
+    step: int,
+    effort_count: int,
     friction: wp.array[float],
     effect: wp.array2d[float],
     dynamics: wp.array[wp.vec3],
@@ -80,10 +82,13 @@ def apply_joint_effort_and_passive_forces(
     joint_qd: wp.array[float],
     joint_f: wp.array[float],
 ):
-    """Generalized force [N or N m] of world w's one joint: its effort plus the joint's passive forces."""
+    """Generalized force [N or N m] of world w's one joint: the effort effort[step, w % effort_count], held over
+    the step of dt [s], plus the joint's passive forces. Worlds that repeat the same windows with other
+    parameters share their efforts."""
     w = wp.tid()
-    joint_f[w] = effort[w] + passive_joint_force(joint_q[w], joint_qd[w], effort[w], friction[w], effect, w,
-                                                 dynamics[w], turns, dt, smoothing)
+    tau = effort[step, w % effort_count]
+    joint_f[w] = tau + passive_joint_force(joint_q[w], joint_qd[w], tau, friction[w], effect, w, dynamics[w], turns,
+                                           dt, smoothing)
 
 
 def joint_turns(joint_type: str) -> float:

@@ -221,7 +221,7 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
     solver = newton.solvers.SolverFeatherstone(model, angular_damping=0.0)
     state_a, state_b = model.state(), model.state()
     control = model.control()
-    effort = wp.zeros(1, dtype=float, device=device)
+    effort = wp.zeros((1, 1), dtype=float, device=device)
     friction = wp.array([obj.friction], dtype=float, device=device)
     passive = wp.array(joint_effect_vector(effect, obj.friction)[None].astype(np.float32), dtype=float,
                        device=device)
@@ -280,14 +280,14 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
         force[k], torque[k] = f, t_h
         # what reaches the joint: the projection a real joint transmits
         applied = axis @ (np.cross(p_handle - origin, f) + t_h) if revolute else axis @ f
-        effort.assign(np.array([applied]))
+        effort.assign(np.array([[applied]]))
         for j in range(config.substeps):
             i = k * config.substeps + j
             body_q[i] = state_a.body_q.numpy()[body]
             q_log[i] = state_a.joint_q.numpy()[0]
             qd_log[i] = state_a.joint_qd.numpy()[0]
             wp.launch(apply_joint_effort_and_passive_forces, dim=1,
-                      inputs=[effort, friction, passive, dynamics, joint_turns(obj.joint_type), sim_dt,
+                      inputs=[effort, 0, 1, friction, passive, dynamics, joint_turns(obj.joint_type), sim_dt,
                               FRICTION_SMOOTHING, state_a.joint_q, state_a.joint_qd],
                       outputs=[control.joint_f], device=device)
             solver.step(state_a, state_b, control, None, sim_dt)

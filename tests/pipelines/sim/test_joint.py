@@ -30,7 +30,7 @@ def _simulate(joint_type: str, axis, origin, body: Inertial, effort: np.ndarray,
     solver = newton.solvers.SolverFeatherstone(model, angular_damping=0.0)
     s0, s1, control = model.state(), model.state(), model.control()
     newton.eval_fk(model, s0.joint_q, s0.joint_qd, s0)
-    arrays = [wp.array(effort, dtype=float), wp.array(np.full(worlds, friction), dtype=float),
+    arrays = [wp.array(effort[None], dtype=float), 0, worlds, wp.array(np.full(worlds, friction), dtype=float),
               wp.array(np.tile(effect, (worlds, 1)).astype(np.float32), dtype=float),
               wp.array(np.tile(joint_dynamics(joint_type, axis, origin, Pose((0.0, 0.0, 0.0)), body), (worlds, 1)),
                        dtype=wp.vec3)]
