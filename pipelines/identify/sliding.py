@@ -782,6 +782,23 @@ def _effect_bounds(config: SlidingConfig) -> tuple:
             (-0.02, 0.02), (-0.02, 0.02))
 
 
+def friction_start(rollout: SlidingRollout, theta, mu_bounds: tuple[float, float], coarse: int = 17,
+                   fine: int = 9) -> float:
+    """The mu a gradient fit starts from: the best of a log scan over `mu_bounds`, refined between the best
+    point's neighbours, at theta's mass and I_zz.
+
+    Across stick and slip the loss in mu has plateaus and kinks: started from a prior above the truth, most
+    windows stick, the gradient is zero or a line search fails, and L-BFGS-B returns the start (a MuJoCo
+    push fitted at its prior, mu +10 %). A scan costs a forward rollout per point."""
+    def loss(mu):
+        return float(np.sum(rollout.residuals(np.r_[mu, theta[1:]]) ** 2))
+
+    grid = np.geomspace(*mu_bounds, coarse)
+    best = int(np.argmin([loss(mu) for mu in grid]))
+    grid = np.geomspace(grid[max(best - 1, 0)], grid[min(best + 1, coarse - 1)], fine)
+    return float(grid[int(np.argmin([loss(mu) for mu in grid]))])
+
+
 def identify_sliding(
     windows: PushWindows,
     body: PlanarBody,
@@ -855,6 +872,8 @@ def identify_sliding(
             sigma2 = max(float(np.sum(rollout.residuals(np.exp(u), c, e) ** 2)) / n_res, 1e-12)
         return x, sigma2
 
+    if free[0]:
+        x[0] = np.log(friction_start(rollout, np.exp(prior), config.mu_bounds))
     x, sigma2 = fit(x)
     u, effect, correction = split(x)
     theta = np.exp(u)
@@ -871,27 +890,31 @@ def identify_sliding(
             theta = np.exp(u)
             moving, slides = sliding_windows(rollout, theta, correction, effect)
 
-    # curvature of the data term by central differences of the tape gradient. Each window's
-    # corrections touch only its own residuals, so their block is diagonal per window and three
-    # perturbations (one per component, all windows at once) give it; the globals take one each.
+    # curvature of the data term, Gauss-Newton: J^T J / sigma^2 from central differences of the residuals.
+    # Across stick and slip the loss has kinks, where differences of the gradient gave an indefinite
+    # Hessian (a MuJoCo push: mu reported undetermined while six windows slid); J^T J is never indefinite.
+    # Each window's corrections touch only its own residuals, so three perturbations (one per component, all
+    # windows at once) give their Jacobian blocks; the globals take one each.
     h = 1e-2
     n = g + 3 * W
-    cols = {}
-    for j in range(g):
-        step = np.zeros(n)
-        step[j] = h
-        cols[j] = (data_gradient(x + step, sigma2)[1] - data_gradient(x - step, sigma2)[1]) / (2 * h)
-    H_tt = np.array([cols[j][:g] for j in range(g)]).reshape(g, g)
-    H_ct = np.array([cols[j][g:] for j in range(g)]).T.reshape(W, 3, g)
-    H_cc = np.zeros((W, 3, 3))
+
+    def jacobian_column(step):
+        u_p, e_p, c_p = split(x + step)
+        u_m, e_m, c_m = split(x - step)
+        return (rollout.residuals(np.exp(u_p), c_p, e_p) - rollout.residuals(np.exp(u_m), c_m, e_m)) / (2 * h)
+
+    J_t = np.stack([jacobian_column(np.eye(n)[j] * h) for j in range(g)], axis=-1)  # [S, W, 3, g]
+    J_c = np.zeros((*J_t.shape[:3], 3))  # [S, W, 3, 3]: each window's residuals by its own corrections
     for comp in range(3):
         step = np.zeros(n)
         step[g + comp::3] = h
-        d = ((data_gradient(x + step, sigma2)[1] - data_gradient(x - step, sigma2)[1]) / (2 * h))[g:].reshape(W, 3)
-        H_cc[:, :, comp] = d
-    H_cc = 0.5 * (H_cc + np.transpose(H_cc, (0, 2, 1)))
+        J_c[..., comp] = jacobian_column(step)
+    J_t = J_t.transpose(1, 0, 2, 3).reshape(W, -1, g) / np.sqrt(sigma2)
+    J_c = J_c.transpose(1, 0, 2, 3).reshape(W, -1, 3) / np.sqrt(sigma2)
     # the globals' information with every window's start velocity profiled out (Schur complement)
-    H = 0.5 * (H_tt + H_tt.T) - sum(H_ct[w].T @ np.linalg.pinv(H_cc[w]) @ H_ct[w] for w in range(W))
+    H = sum(J_t[w].T @ J_t[w] - (J_t[w].T @ J_c[w]) @ np.linalg.pinv(J_c[w].T @ J_c[w]) @ (J_c[w].T @ J_t[w])
+            for w in range(W))
+    H = 0.5 * (H + H.T)
     H_post = H + np.diag(np.r_[prior_curv[free_idx], np.zeros(len(slots))])
     cov = np.linalg.pinv(H_post)
     var = np.maximum(np.diag(cov), 0.0)

@@ -71,7 +71,7 @@ def main_std(effect) -> float | None:
 def _diagnose_case(case: Case, duration_s: float, config) -> dict:
     """Record `case`, diagnose it as a build would, and score what came out (one table row, less its index)."""
     from pipelines.diagnose import diagnose_held, diagnose_jointed, diagnose_pushed
-    from pipelines.identify.sliding import SlidingConfig
+    from pipelines.identify.sliding import SUPPORTS, SlidingConfig, identify_pushed
 
     kind = case_kind(case)
     mujoco = case.engine == "mujoco"
@@ -86,7 +86,9 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
                                              config.joint_window_s))
         elif kind == "push":
             trial, holdout, body, mu_prior = record_push_case(case, Path(tmp))
-            diagnosis, refit = diagnose_pushed([trial], [holdout], body, mu_prior, SlidingConfig(), config)
+            # the support the build would choose (`identify_pushed`), which the diagnosis then keeps
+            support = identify_pushed([trial], holdout, body, mu_prior, SlidingConfig(), supports=SUPPORTS).config
+            diagnosis, refit = diagnose_pushed([trial], [holdout], body, mu_prior, support, config)
             true_fit = None
         else:
             record = record_mujoco_case if mujoco else record_case

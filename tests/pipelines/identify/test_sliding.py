@@ -176,6 +176,28 @@ def test_friction_recovered_from_a_turning_push(push_recording):
     assert known.rmse_position_m < 1e-3
 
 
+def test_friction_found_from_a_prior_at_which_the_block_mostly_sticks(tmp_path):
+    """A MuJoCo push (mu 0.455) fitted from the prior 0.5: at the prior most windows stick and the gradient
+    fit alone stayed there (+10 %); the scan it now starts from finds mu within 5 %."""
+    from dataclasses import replace
+
+    from pipelines.identify.sliding import friction_start
+    from pipelines.synth.mujoco_push import write_pushed_mujoco
+
+    push = PushConfig(mu=0.455, mass_kg=0.616, offset_m=-0.023, yaw0_rad=-0.29,
+                      force_bias_n=(0.31, 0.41, 0.11), seed=0)
+    write_pushed_mujoco(tmp_path / "push.mcap", push)
+    rec = read_recording(tmp_path / "push.mcap")
+    corners = replace(SlidingConfig(), support="corners")
+    body = _box(push.mass_kg)
+    windows = push_windows(rec, body, corners, estimate_force_bias(rec, corners))
+    start = friction_start(SlidingRollout(windows, body, corners), np.array([0.5, body.mass_kg, body.izz_kgm2]),
+                           corners.mu_bounds)
+    assert start == pytest.approx(push.mu, rel=0.1)
+    fit = identify_sliding(windows, body, corners, mu_prior=0.5, free=(True, False, True))
+    assert fit.theta[0] == pytest.approx(push.mu, rel=0.05) and fit.determined[0]
+
+
 def test_friction_held_above_every_push_is_a_bound_not_a_measurement(push_recording):
     """Confined to mu >= 1 on a push with mu 0.35, the simulated block sticks in every window: the fit says
     mu is not determined (a lower bound) rather than reporting the bound with the curvature's small std."""
