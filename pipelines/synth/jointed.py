@@ -22,6 +22,7 @@ import warp as wp
 from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
+from assets.conventions import GRAVITY_M_S2
 
 from pipelines.sim.joint import (
     FRICTION_SMOOTHING,
@@ -32,7 +33,7 @@ from pipelines.sim.joint import (
     joint_turns,
 )
 
-from .held import GRAVITY_M_S2, HeldMotion
+from .held import HeldMotion
 
 
 @dataclass(frozen=True)

@@ -39,8 +39,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
+from assets.conventions import GRAVITY_M_S2
 
-from .held import GRAVITY_M_S2, ConcealedEffect, HeldMotion, HeldMotionConfig, SensorNoise, measure, \
+from .held import ConcealedEffect, HeldMotion, HeldMotionConfig, SensorNoise, measure, \
     multisine_reference
 
 if TYPE_CHECKING:

@@ -49,8 +49,10 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from assets.conventions import GRAVITY_MAGNITUDE_M_S2 as GRAVITY_M_S2
+
 from .mujoco_engine import INTEGRATORS, MujocoSettings, mjcf_vec, mjcf_quat
-from .push import GRAVITY_M_S2, PushConfig, PushTruth
+from .push import PushConfig, PushTruth
 
 __all__ = ["PUSH_WRENCH_FRAMES", "PushContact", "make_pushed_sample", "push_settings", "pusher_reference",
            "pushed_block_xml", "simulate_pushed_mujoco", "write_pushed_mujoco"]

@@ -320,7 +320,8 @@ def mass_bound_pct(case: WorkshopCase, level: str, root: Path = WORKSHOP) -> flo
     parameters unknown): sqrt(2/pi) sigma_m / m."""
     from scipy.spatial.transform import Rotation
 
-    from pipelines.identify.least_squares import GRAVITY_M_S2, newton_euler_regressor
+    from assets.conventions import GRAVITY_M_S2
+    from pipelines.identify.least_squares import newton_euler_regressor
 
     force_n, torque_nm, _, _ = NOISE_LEVELS[level]
     if force_n == 0:

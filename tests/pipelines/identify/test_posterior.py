@@ -146,7 +146,8 @@ def held_recording(path, body: Inertial, grasp: Pose, duration_s: float, rng: np
     simulation), 200 Hz poses and 1 kHz wrench with an ATI-class sensor's noise, written as MCAP and read back."""
     from scipy.spatial.transform import Rotation
 
-    from pipelines.identify.least_squares import GRAVITY_M_S2, newton_euler_regressor
+    from assets.conventions import GRAVITY_M_S2
+    from pipelines.identify.least_squares import newton_euler_regressor
     from pipelines.logs import PoseTrack, WrenchTrack, read_recording
     from pipelines.synth.recording import write_recording
 
