@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
 from assets.conventions import GRAVITY_M_S2
+from assets.recording import JointTrack, PoseTrack, Recording, WrenchTrack
 
 from pipelines.sim.joint import (
     FRICTION_SMOOTHING,
@@ -314,7 +315,6 @@ def write_jointed_recording(path, obj: JointedObject, motion: JointedMotion, noi
                             encoder_resolution: float = 1e-5):
     """Write one trial as MCAP: handle pose and wrench as `measure` makes them, and the joint's
     encoder (sensor_msgs/JointState, quantised at `encoder_resolution` [m] or [rad]) at the tracker's stamps."""
-    from ..logs import JointTrack, PoseTrack, WrenchTrack
     from .held import measure
     from .recording import write_recording
 
@@ -334,7 +334,6 @@ def noisy_pose_recording(t_s, position, rotation: Rotation, rng: np.random.Gener
     for what reads the motion alone (kind detection)."""
     from pathlib import Path
 
-    from ..logs import PoseTrack, Recording, WrenchTrack
     from .held import SensorNoise
 
     noise = noise or SensorNoise()

@@ -40,6 +40,7 @@ from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
 from assets.conventions import GRAVITY_M_S2
+from assets.recording import JointTrack, PoseTrack, WrenchTrack
 
 from .held import ConcealedEffect, HeldMotion, HeldMotionConfig, SensorNoise, measure, \
     multisine_reference
@@ -506,7 +507,6 @@ def write_motion_recording(
     joint: (joint name, the JointedMotion) adds its encoder (quantised at `encoder_resolution`) as
     sensor_msgs/JointState at the tracker's stamps.
     """
-    from ..logs import JointTrack, PoseTrack, WrenchTrack
     from .recording import write_recording
 
     if wrench_frame not in WRENCH_FRAMES:

@@ -271,7 +271,7 @@ def write_pushed_mujoco(path: Path, config: PushConfig, settings: MujocoSettings
     /tf_static gives; the torque is zero about the tip's axis, which a frictionless round tip's force
     passes through (the static frame's origin, the tip's start, only stands in for the moving one).
     """
-    from ..logs import PointTrack, PoseTrack, WrenchTrack
+    from assets.recording import PointTrack, PoseTrack, WrenchTrack
     from .recording import write_recording
 
     if wrench_frame not in PUSH_WRENCH_FRAMES:

@@ -24,8 +24,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from assets.conventions import GRAVITY_MAGNITUDE_M_S2 as GRAVITY_M_S2
+from assets.recording import PointTrack, PoseTrack, WrenchTrack
 
-from ..logs import PointTrack, PoseTrack, WrenchTrack
 from .recording import write_recording
 
 __all__ = ["PushConfig", "PushTruth", "simulate_push", "write_push"]

@@ -103,7 +103,8 @@ def workshop_case(tool: str, directory: Path, rng: np.random.Generator, root: Pa
     from scipy.spatial.transform import Rotation
 
     from assets import Inertial, Pose
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from assets.recording import PoseTrack, WrenchTrack
+    from pipelines.logs import read_recording
     from pipelines.synth.recording import write_recording
 
     if level not in NOISE_LEVELS:

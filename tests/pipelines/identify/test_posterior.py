@@ -147,8 +147,9 @@ def held_recording(path, body: Inertial, grasp: Pose, duration_s: float, rng: np
     from scipy.spatial.transform import Rotation
 
     from assets.conventions import GRAVITY_M_S2
+    from assets.recording import PoseTrack, WrenchTrack
     from pipelines.identify.least_squares import newton_euler_regressor
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from pipelines.logs import read_recording
     from pipelines.synth.recording import write_recording
 
     freq = np.array([[0.7, 1.1, 1.6], [0.9, 1.3, 0.5]])  # [Hz] per axis: translation, rotation
