@@ -57,7 +57,7 @@ import numpy as np
 if TYPE_CHECKING:
     import trimesh
 
-from .scan import Frame, Intrinsics, Scan
+from .rgbd import Frame, Intrinsics, Scan
 
 __all__ = [
     "ReconstructConfig",
