@@ -34,12 +34,11 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from .scan import Frame
+from .rgbd import Frame, ScanError, decoded_pixels, open_image
 
 __all__ = ["PoseErrors", "PoseEstimate", "PosingConfig", "PosingError", "estimate_poses", "pose_errors"]
 
@@ -119,7 +118,7 @@ class PoseErrors:
         return out
 
 
-def estimate_poses(frames: Sequence["Frame"], config: PosingConfig = PosingConfig()) -> PoseEstimate:
+def estimate_poses(frames: Sequence[Frame], config: PosingConfig = PosingConfig()) -> PoseEstimate:
     """Pose RGB-D frames by odometry (ICP from several starts), a pose graph and frame-to-model ICP.
 
     Args:
@@ -275,7 +274,7 @@ def pose_errors(estimated: np.ndarray, given: np.ndarray) -> PoseErrors:
 # ---------------------------------------------------------------------------------------------
 
 
-def _check(frames: Sequence["Frame"], config: PosingConfig) -> None:
+def _check(frames: Sequence[Frame], config: PosingConfig) -> None:
     if len(frames) < 2:
         raise PosingError(f"needs at least two frames to estimate motion, got {len(frames)}")
     if not 1 <= config.stride <= 8:
@@ -286,7 +285,7 @@ def _check(frames: Sequence["Frame"], config: PosingConfig) -> None:
         raise PosingError(f"min_fitness must lie in (0, 1), got {config.min_fitness}")
 
 
-def _pyramid(i: int, frame: "Frame", voxels: tuple[float, ...], config: PosingConfig) -> list:
+def _pyramid(i: int, frame: Frame, voxels: tuple[float, ...], config: PosingConfig) -> list:
     """The frame's cloud in its camera [m], downsampled at each voxel size, with normals."""
     import open3d as o3d
 
@@ -313,7 +312,7 @@ def _pyramid(i: int, frame: "Frame", voxels: tuple[float, ...], config: PosingCo
 class _RgbdOdometry:
     """Open3D's multi-scale RGB-D odometry (photometric + point-to-plane terms) between two frames."""
 
-    def __init__(self, frames: Sequence["Frame"], config: PosingConfig):
+    def __init__(self, frames: Sequence[Frame], config: PosingConfig):
         self.frames, self.config = frames, config
         self._images: dict[int, object] = {}
 
@@ -355,19 +354,17 @@ def _read_color(path, intr):
     import open3d as o3d
     import open3d.core as o3c
 
-    from .scan import ScanError, _open_image, _pixels
-
     try:
-        with _open_image(path) as im:
+        with open_image(path) as im:
             if im.size != (intr.width, intr.height):  # checked before decoding: the header may claim any size
                 return None
-            rgb = _pixels(im, path, "RGB").astype(np.float32) / 255.0
+            rgb = decoded_pixels(im, path, "RGB").astype(np.float32) / 255.0
     except ScanError:
         return None
     return o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(rgb)))
 
 
-def _fused_cloud(frames: Sequence["Frame"], poses: np.ndarray, voxel: float, config: PosingConfig):
+def _fused_cloud(frames: Sequence[Frame], poses: np.ndarray, voxel: float, config: PosingConfig):
     """The TSDF-fused surface of all frames as a cloud with normals (world frame)."""
     import open3d as o3d
     import open3d.core as o3c

@@ -30,19 +30,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .logs import (
-    MAX_FORCE_N,
-    MAX_POSITION_M,
-    MAX_TORQUE_NM,
-    LogError,
-    PointTrack,
-    PoseTrack,
-    Recording,
-    WrenchTrack,
-    bounded,
-    drop_far_stamps,
-    require_overlap,
-)
+from assets.recording import PointTrack, PoseTrack, Recording, WrenchTrack
+
+from .logs.checks import MAX_FORCE_N, MAX_POSITION_M, MAX_TORQUE_NM, LogError, bounded, drop_far_stamps, require_overlap
 
 __all__ = ["PushTrialName", "TIP_RADIUS_M", "read_push_trial"]
 

@@ -53,11 +53,10 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from .reconstruct import ReconstructConfig, ReconstructError, Reconstruction, reconstruct, simplify_watertight
+from .rgbd import Scan
 
 if TYPE_CHECKING:
     import trimesh
-
-    from .scan import Scan
 
 __all__ = ["Registration", "SessionError", "SessionsConfig", "merge_reconstructions", "merge_sessions",
            "register_session"]

@@ -32,10 +32,10 @@ import warp as wp
 from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
+from assets.conventions import GRAVITY_M_S2
 
 from pipelines.sim.joint import (
     FRICTION_SMOOTHING,
-    GRAVITY_M_S2,
     JOINT_EFFECT_SIZE,
     add_jointed_part,
     apply_joint_effort_and_passive_forces,

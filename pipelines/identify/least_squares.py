@@ -25,11 +25,10 @@ import numpy as np
 from scipy.spatial.transform import Slerp
 
 from assets import Inertial, Pose
+from assets.conventions import GRAVITY_M_S2
 
 from .noise import NoiseLevels, estimate_noise_levels
 from .windows import angular_velocity, central_derivative, lowpass, smoothed_pose_grid
-
-GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
 
 
 @dataclass(frozen=True)

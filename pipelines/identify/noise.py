@@ -46,13 +46,13 @@ def estimate_noise_levels(pose_t_s, pose_position, pose_quat_xyzw, wrench_t_s, w
 
 
 def recording_noise_levels(recording) -> NoiseLevels:
-    """`estimate_noise_levels` of a `pipelines.logs.Recording`'s tracked poses and world-frame wrench."""
+    """`estimate_noise_levels` of a `assets.recording.Recording`'s tracked poses and world-frame wrench."""
     pose, wrench = recording.pose, recording.wrench
     return estimate_noise_levels(pose.t_s, pose.position, pose.quat_xyzw, wrench.t_s, wrench.force, wrench.torque)
 
 
 def renoised(recording, levels: NoiseLevels, rng: np.random.Generator):
-    """`recording` (a `pipelines.logs.Recording`) with independent white noise of `levels` added once more to its
+    """`recording` (a `assets.recording.Recording`) with independent white noise of `levels` added once more to its
     tracked poses (position per axis [m], rotation per axis [rad]) and its world-frame wrench (per axis [N],
     [N m]): the same recording as a second, equally noisy set of sensors would have given. `wrench_raw` is left
     as read."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from assets import Pose
+from assets.conventions import GRAVITY_M_S2
 
 from .inertia import THETA_SIZE
 from .kernels import (
@@ -20,8 +21,6 @@ from .kernels import (
     vec_columns,
 )
 from .windows import ShootingWindows
-
-GRAVITY_M_S2 = (0.0, 0.0, -9.81)
 
 
 class FreeBodyRollout:
@@ -44,9 +43,9 @@ class FreeBodyRollout:
         self.sets = sets
         self.device = device
         W = windows.window_count
-        sub = newton.ModelBuilder(gravity=GRAVITY_M_S2)
+        sub = newton.ModelBuilder(gravity=tuple(GRAVITY_M_S2))
         sub.add_body(mass=1.0, inertia=wp.mat33(np.eye(3) * 1e-3), lock_inertia=True)
-        builder = newton.ModelBuilder(gravity=GRAVITY_M_S2)
+        builder = newton.ModelBuilder(gravity=tuple(GRAVITY_M_S2))
         builder.replicate(sub, sets * W)
         self.model = builder.finalize(device=device, requires_grad=requires_grad)
         self.solver = newton.solvers.SolverSemiImplicit(self.model, angular_damping=0.0)

@@ -39,6 +39,8 @@ import numpy as np
 import warp as wp
 from scipy.spatial.transform import Rotation
 
+from assets.conventions import GRAVITY_MAGNITUDE_M_S2 as GRAVITY_M_S2
+
 from .windows import local_twist, lowpass
 
 __all__ = [
@@ -68,7 +70,6 @@ __all__ = [
     "WrenchBalance",
 ]
 
-GRAVITY_M_S2 = 9.81
 _GRID = 4  # contacts per side of the support face
 SUPPORTS = ("uniform", "corners")
 """Support-face load models of `SlidingConfig.support`."""

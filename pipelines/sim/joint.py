@@ -16,8 +16,8 @@ import numpy as np
 import warp as wp
 
 from assets import Inertial, Pose
+from assets.conventions import GRAVITY_M_S2
 
-GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
 
 FRICTION_SMOOTHING = 1e-3
 """eps of the friction law F(v) tanh(v / eps) [m/s or rad/s]: a part under a force P below F creeps at

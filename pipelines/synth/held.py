@@ -14,8 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
-
-GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
+from assets.conventions import GRAVITY_M_S2
 
 
 @dataclass(frozen=True)

@@ -16,12 +16,15 @@ force (damping, spring, Stribeck breakaway) go in through `joint_f`
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import warp as wp
 from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
+from assets.conventions import GRAVITY_M_S2
+from assets.recording import JointTrack, PoseTrack, Recording, WrenchTrack
 
 from pipelines.sim.joint import (
     FRICTION_SMOOTHING,
@@ -32,7 +35,8 @@ from pipelines.sim.joint import (
     joint_turns,
 )
 
-from .held import GRAVITY_M_S2, HeldMotion
+from .held import HeldMotion, SensorNoise, measure
+from .recording import write_recording
 
 
 @dataclass(frozen=True)
@@ -313,10 +317,6 @@ def write_jointed_recording(path, obj: JointedObject, motion: JointedMotion, noi
                             encoder_resolution: float = 1e-5):
     """Write one trial as MCAP: handle pose and wrench as `measure` makes them, and the joint's
     encoder (sensor_msgs/JointState, quantised at `encoder_resolution` [m] or [rad]) at the tracker's stamps."""
-    from ..logs import JointTrack, PoseTrack, WrenchTrack
-    from .held import measure
-    from .recording import write_recording
-
     t_pose, position, quat, t_wrench, force, torque = measure(motion.held, noise, rng)
     idx = np.rint(t_pose / (motion.held.t_s[1] - motion.held.t_s[0])).astype(int)
     q = np.round(motion.q[idx] / encoder_resolution) * encoder_resolution
@@ -331,11 +331,6 @@ def write_jointed_recording(path, obj: JointedObject, motion: JointedMotion, noi
 def noisy_pose_recording(t_s, position, rotation: Rotation, rng: np.random.Generator, noise=None):
     """A Recording of a tracked frame's poses [m] with the tracker's noise, and a wrench of sensor noise only:
     for what reads the motion alone (kind detection)."""
-    from pathlib import Path
-
-    from ..logs import PoseTrack, Recording, WrenchTrack
-    from .held import SensorNoise
-
     noise = noise or SensorNoise()
     position = position + rng.normal(0, noise.position_sigma_m, position.shape)
     rotation = rotation * Rotation.from_rotvec(rng.normal(0, noise.rotation_sigma_rad, (len(t_s), 3)))

@@ -39,9 +39,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from assets import Inertial, Pose
+from assets.conventions import GRAVITY_M_S2
+from assets.recording import JointTrack, PoseTrack, WrenchTrack
 
-from .held import GRAVITY_M_S2, ConcealedEffect, HeldMotion, HeldMotionConfig, SensorNoise, measure, \
+from .held import ConcealedEffect, HeldMotion, HeldMotionConfig, SensorNoise, measure, \
     multisine_reference
+from .recording import write_recording
 
 if TYPE_CHECKING:
     from .jointed import JointedMotion, JointedMotionConfig, JointedObject
@@ -505,9 +508,6 @@ def write_motion_recording(
     joint: (joint name, the JointedMotion) adds its encoder (quantised at `encoder_resolution`) as
     sensor_msgs/JointState at the tracker's stamps.
     """
-    from ..logs import JointTrack, PoseTrack, WrenchTrack
-    from .recording import write_recording
-
     if wrench_frame not in WRENCH_FRAMES:
         raise ValueError(f"wrench_frame: expected one of {WRENCH_FRAMES}, got {wrench_frame!r}")
     bias = effect is not None and effect.name == "sensor_bias"

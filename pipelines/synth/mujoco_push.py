@@ -49,8 +49,10 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from assets.conventions import GRAVITY_MAGNITUDE_M_S2 as GRAVITY_M_S2
+
 from .mujoco_engine import INTEGRATORS, MujocoSettings, mjcf_vec, mjcf_quat
-from .push import GRAVITY_M_S2, PushConfig, PushTruth
+from .push import PushConfig, PushTruth
 
 __all__ = ["PUSH_WRENCH_FRAMES", "PushContact", "make_pushed_sample", "push_settings", "pusher_reference",
            "pushed_block_xml", "simulate_pushed_mujoco", "write_pushed_mujoco"]
@@ -269,7 +271,7 @@ def write_pushed_mujoco(path: Path, config: PushConfig, settings: MujocoSettings
     /tf_static gives; the torque is zero about the tip's axis, which a frictionless round tip's force
     passes through (the static frame's origin, the tip's start, only stands in for the moving one).
     """
-    from ..logs import PointTrack, PoseTrack, WrenchTrack
+    from assets.recording import PointTrack, PoseTrack, WrenchTrack
     from .recording import write_recording
 
     if wrench_frame not in PUSH_WRENCH_FRAMES:

@@ -23,12 +23,12 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..logs import PointTrack, PoseTrack, WrenchTrack
+from assets.conventions import GRAVITY_MAGNITUDE_M_S2 as GRAVITY_M_S2
+from assets.recording import PointTrack, PoseTrack, WrenchTrack
+
 from .recording import write_recording
 
 __all__ = ["PushConfig", "PushTruth", "simulate_push", "write_push"]
-
-GRAVITY_M_S2 = 9.81
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from pipelines.logs import JointTrack, PointTrack, PoseTrack, WrenchTrack
+from assets.recording import JointTrack, PointTrack, PoseTrack, WrenchTrack
 
 __all__ = ["write_recording", "MSGDEFS"]
 

@@ -169,7 +169,7 @@ def _record_push(scene_path: Path, out: Path) -> Path:
     along the placement's +y axis, 1.05 to 1.35 mu m g, at the -y face on a line 2 mm off the COM (it turns)."""
     import mujoco
 
-    from pipelines.logs import PointTrack, PoseTrack, WrenchTrack
+    from assets.recording import PointTrack, PoseTrack, WrenchTrack
     from pipelines.synth.recording import write_recording
 
     model = mujoco.MjModel.from_xml_path(str(scene_path))

@@ -9,15 +9,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipelines.logs import (
-    JointTrack,
-    LogError,
-    PointTrack,
-    PoseTrack,
-    WrenchTrack,
-    inspect_recording,
-    read_recording,
-)
+from assets.recording import JointTrack, PointTrack, PoseTrack, WrenchTrack
+from pipelines.logs import LogError, inspect_recording, read_recording
 from pipelines.synth import recording as synth_recording
 from pipelines.synth.recording import write_recording
 

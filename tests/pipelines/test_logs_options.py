@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipelines.logs import LogError, PoseTrack, WrenchTrack, read_recording
+from assets.recording import PoseTrack, WrenchTrack
+from pipelines.logs import LogError, read_recording
 from pipelines.synth.recording import write_recording
 from twin.cli import main
 

@@ -13,7 +13,8 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from pipelines.posing import PosingConfig, PosingError, estimate_poses, pose_errors
-from pipelines.scan import ScanError, read_scan
+from pipelines.rgbd import ScanError
+from pipelines.scan import read_scan
 from pipelines.synth.render import RenderConfig, render_scan
 
 REAL_7SCENES = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd" / "7scenes_tsdf_demo_subset"

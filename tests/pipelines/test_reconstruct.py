@@ -120,19 +120,19 @@ def test_silhouette_pixels_are_left_out_of_the_fusion_on_both_sides_only():
     """A 5 mm step (an object's edge on the table) loses the pixel columns on both sides of it; a noisy flat
     surface (0.5 mm noise, a 3 mm limit: twice a 3-sigma truncation) keeps nearly all, and pixels beside a
     dropout keep theirs."""
-    from pipelines.reconstruct import _silhouettes_dropped
+    from pipelines.reconstruct.fusion import silhouettes_dropped
 
     rng = np.random.default_rng(0)
     depth = (0.4 + rng.normal(0.0, 0.5e-3, (60, 80))).astype(np.float32)
     depth[:, 40:] += 0.005
     depth[10, 10] = 0.0  # a dropout
-    out = _silhouettes_dropped(depth, 0.003)
+    out = silhouettes_dropped(depth, 0.003)
     dropped = out == 0
     assert dropped[:, 39:41].all()
     assert dropped[9:12, 9:12].sum() == 1
     assert dropped.sum() - (2 * 60 + 1) < 0.005 * depth.size
     np.testing.assert_array_equal(out[~dropped], depth[~dropped])
-    np.testing.assert_array_equal(_silhouettes_dropped(depth, 0.0), depth)
+    np.testing.assert_array_equal(silhouettes_dropped(depth, 0.0), depth)
 
 
 def test_a_band_under_two_noise_sigmas_wide_leaves_the_wedges_under_a_hex_bar_open(tmp_path):

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pipelines.scan import OPENCV_FROM_OPENGL, ScanError, read_scan
+from pipelines.rgbd import OPENCV_FROM_OPENGL, ScanError
+from pipelines.scan import read_scan
 
 W, H = 8, 6
 

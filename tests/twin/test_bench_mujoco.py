@@ -16,7 +16,8 @@ def test_sysid_recovers_held_cube_from_clean_recording(tmp_path):
     from assets import Inertial, Pose
     from assets.materials import material_range
     from pipelines.identify import InertialBounds, tracked_to_object
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from assets.recording import PoseTrack, WrenchTrack
+    from pipelines.logs import read_recording
     from pipelines.priors import uniform_density_prior
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
     from pipelines.synth.recording import write_recording

@@ -43,7 +43,7 @@ def _camera_above(x: float, y: float, height: float):
     """A 640x480 view from `height` [m] over (x, y), looking straight down."""
     from types import SimpleNamespace
 
-    from pipelines.scan import Intrinsics
+    from pipelines.rgbd import Intrinsics
 
     T = np.eye(4)
     T[:3, :3] = np.diag([1.0, -1.0, -1.0])  # camera x along world x, z down

@@ -34,7 +34,7 @@ def _exact_kinematics(motion):
     [rad/s] and angular acceleration [rad/s^2]; also the angular velocity in world axes."""
     from scipy.spatial.transform import Rotation
 
-    from pipelines.identify.least_squares import GRAVITY_M_S2
+    from assets.conventions import GRAVITY_M_S2
 
     dt = motion.t_s[1] - motion.t_s[0]
     rot = Rotation.from_quat(motion.grasp_quat_xyzw)

@@ -161,7 +161,8 @@ def free_case_body(case: Case):
 def record_case(case: Case, directory: Path, duration_s: float):
     """Simulate the case's trial and held-out recordings into `directory`; returns (trial, holdout, prior,
     X_tracked_body) as `diagnose_held` takes them."""
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from assets.recording import PoseTrack, WrenchTrack
+    from pipelines.logs import read_recording
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
     from pipelines.synth.recording import write_recording
 

@@ -15,7 +15,8 @@ import numpy as np
 
 from pipelines.meshes import MeshError, read_mesh
 from pipelines.posing import PosingConfig, PosingError
-from pipelines.scan import ScanError, read_scan
+from pipelines.rgbd import ScanError
+from pipelines.scan import read_scan
 from twin.bench.fuzz import FuzzTarget, mutate_bytes, mutate_json
 
 _SIZE = (32, 24)

@@ -54,7 +54,8 @@ def paper_cases(seeds: int, duration_s: float, tmp: Path, names: tuple[str, ...]
     from assets import Inertial, Pose
     from assets.materials import material_range
     from pipelines.identify import InertialBounds
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from assets.recording import PoseTrack, WrenchTrack
+    from pipelines.logs import read_recording
     from pipelines.priors import uniform_density_prior
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
     from pipelines.synth.mujoco_engine import simulate_held_mujoco

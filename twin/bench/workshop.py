@@ -103,7 +103,8 @@ def workshop_case(tool: str, directory: Path, rng: np.random.Generator, root: Pa
     from scipy.spatial.transform import Rotation
 
     from assets import Inertial, Pose
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from assets.recording import PoseTrack, WrenchTrack
+    from pipelines.logs import read_recording
     from pipelines.synth.recording import write_recording
 
     if level not in NOISE_LEVELS:
@@ -320,7 +321,8 @@ def mass_bound_pct(case: WorkshopCase, level: str, root: Path = WORKSHOP) -> flo
     parameters unknown): sqrt(2/pi) sigma_m / m."""
     from scipy.spatial.transform import Rotation
 
-    from pipelines.identify.least_squares import GRAVITY_M_S2, newton_euler_regressor
+    from assets.conventions import GRAVITY_M_S2
+    from pipelines.identify.least_squares import newton_euler_regressor
 
     force_n, torque_nm, _, _ = NOISE_LEVELS[level]
     if force_n == 0:

@@ -146,8 +146,10 @@ def held_recording(path, body: Inertial, grasp: Pose, duration_s: float, rng: np
     simulation), 200 Hz poses and 1 kHz wrench with an ATI-class sensor's noise, written as MCAP and read back."""
     from scipy.spatial.transform import Rotation
 
-    from pipelines.identify.least_squares import GRAVITY_M_S2, newton_euler_regressor
-    from pipelines.logs import PoseTrack, WrenchTrack, read_recording
+    from assets.conventions import GRAVITY_M_S2
+    from assets.recording import PoseTrack, WrenchTrack
+    from pipelines.identify.least_squares import newton_euler_regressor
+    from pipelines.logs import read_recording
     from pipelines.synth.recording import write_recording
 
     freq = np.array([[0.7, 1.1, 1.6], [0.9, 1.3, 0.5]])  # [Hz] per axis: translation, rotation

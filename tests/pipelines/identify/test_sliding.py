@@ -5,12 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from assets.recording import PointTrack, PoseTrack, Recording, WrenchTrack
 from pipelines.identify.sliding import (
     PlanarBody, PushedIdentification, PushWindows, SlidingConfig, SlidingRollout, TurnCheck, estimate_force_bias,
     identify_sliding, push_windows, sliding_windows, steady_windows, turn_check, wrench_balance_error,
     wrench_balance_friction,
 )
-from pipelines.logs import PointTrack, PoseTrack, Recording, WrenchTrack, read_recording
+from pipelines.logs import read_recording
 from pipelines.synth.push import PushConfig, write_push
 
 HALF = (0.05, 0.05, 0.005)
