@@ -125,7 +125,7 @@ class Synth:
     """Physics to conceal in both recordings (the model twin starts from lacks it); with --object:
     viscous_damping, spring or stribeck_friction on the joint."""
     effect_magnitude: float = 2.0
-    """Size of the concealed effect as a multiple of the sensor's noise (see twin/bench/diagnose.py)."""
+    """Size of the concealed effect as a multiple of the sensor's noise (see pipelines/synth/effects.py)."""
     engine: Literal["newton", "mujoco"] = "newton"
     """Simulator that makes the recordings: twin's own Newton models, or MuJoCo's (a PD-servoed robot, joint
     frictionloss, its integrator): a truth the identification does not share."""
@@ -301,10 +301,10 @@ def _run_synth(args: Synth) -> None:
         return
 
     if args.object is not None:
+        from pipelines.synth.effects import concealed_joint_effect
         from pipelines.synth.held import SensorNoise
         from pipelines.synth.jointed import jointed_paper_objects
         from pipelines.synth.sample import JointedSampleConfig, make_jointed_sample
-        from twin.bench.diagnose import concealed_joint_effect
 
         effect = None
         if args.effect != "none":
@@ -331,8 +331,8 @@ def _run_synth(args: Synth) -> None:
     if args.effect != "none":
         import numpy as np
 
+        from pipelines.synth.effects import concealed_effect
         from pipelines.synth.held import SensorNoise
-        from twin.bench.diagnose import concealed_effect
 
         effect = concealed_effect(args.effect, args.effect_magnitude, np.random.default_rng(args.seed), SensorNoise())
         _log(f"concealing {effect.name} {effect.params}")
@@ -421,82 +421,74 @@ def _dispatch(command) -> None:
     elif isinstance(command, Synth):
         _run_synth(command)
     else:
-        if command.what == "sample":
-            from twin.bench.sample import bench_sample
+        _run_bench(command)
 
-            bench_sample(command.sample, command.methods)
-        elif command.what == "diagnose":
-            from twin.bench.diagnose import (
-                bench_diagnose, bench_diagnose_push_real, bench_diagnose_push_synth, bench_diagnose_workshop,
-            )
 
-            if command.workshop:
-                bench_diagnose_workshop()
-            elif command.push_real:
-                bench_diagnose_push_real(command.blocks)
-            elif command.push_synth:
-                bench_diagnose_push_synth(command.seeds)
-            else:
-                bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases,
-                               engine=command.engine)
-        elif command.what == "workshop":
-            from twin.bench.workshop import bench_workshop
+BENCHMARKS_MISSING = "benchmarks/: twin bench runs from a source checkout of twin (the benchmarks are not installed)"
 
-            bench_workshop(command.seeds, command.levels, method=command.identify_with,
-                           parts=command.parts)
-        elif command.what == "furniture":
-            from twin.bench.furniture import bench_furniture
 
-            bench_furniture(command.noise)
-        elif command.what == "fuzz":
-            from twin.bench.fuzz import bench_fuzz
+def _benchmark(name: str):
+    """The module benchmarks.NAME of the source checkout twin runs from (the `benchmarks/` folder beside the
+    `twin` package), its root put on sys.path; an installed twin ships no benchmarks: a RuntimeError."""
+    import importlib
 
-            bench_fuzz(command.inputs, command.readers, sample=command.sample)
-        elif command.what == "crlb":
-            from twin.bench.crlb import bench_crlb
+    import twin
 
-            bench_crlb(command.draws)
-        elif command.what == "throughput":
-            from twin.bench.throughput import bench_throughput
+    root = Path(twin.__file__).resolve().parents[1]
+    if not (root / "benchmarks" / f"{name}.py").is_file():
+        raise RuntimeError(BENCHMARKS_MISSING)
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))
+    return importlib.import_module(f"benchmarks.{name}")
 
-            bench_throughput(command.device, command.objects)
-        elif command.what == "mujoco":
-            from twin.bench.mujoco import bench_mujoco
 
-            bench_mujoco(command.seeds)
-        elif command.what == "reconstruct":
-            from twin.bench.reconstruct import bench_reconstruct
-
-            bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only, names=command.names,
-                              noises=command.noise)
-        elif command.what == "push":
-            from twin.bench.push import bench_push
-
-            bench_push(command.seeds, engine=command.engine)
-        elif command.what == "push-real":
-            from twin.bench.push import bench_push_offsets, bench_push_real
-
-            if command.offsets_only:
-                bench_push_offsets()
-            else:
-                bench_push_real(blocks=command.blocks)
-        elif command.what == "push-mit":
-            from twin.bench.push_mit import bench_push_mit
-
-            bench_push_mit()
-        elif command.what == "priors":
-            from twin.bench.priors import bench_priors
-
-            bench_priors()
-        elif command.jointed_only:
-            from twin.bench.paper_jointed import bench_paper_jointed
-
-            bench_paper_jointed(command.seeds, engine=command.engine)
+def _run_bench(command: Bench) -> None:
+    if command.what == "sample":
+        _benchmark("sample").bench_sample(command.sample, command.methods)
+    elif command.what == "diagnose":
+        diagnose = _benchmark("diagnose")
+        if command.workshop:
+            diagnose.bench_diagnose_workshop()
+        elif command.push_real:
+            diagnose.bench_diagnose_push_real(command.blocks)
+        elif command.push_synth:
+            diagnose.bench_diagnose_push_synth(command.seeds)
         else:
-            from twin.bench.paper import bench_paper
-
-            bench_paper(command.seeds, paper_optimizer=command.paper_optimizer,
-                        from_vlm_starts=command.vlm_starts, engine=command.engine)
+            diagnose.bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases,
+                                    engine=command.engine)
+    elif command.what == "workshop":
+        _benchmark("workshop").bench_workshop(command.seeds, command.levels, method=command.identify_with,
+                                              parts=command.parts)
+    elif command.what == "furniture":
+        _benchmark("furniture").bench_furniture(command.noise)
+    elif command.what == "fuzz":
+        _benchmark("fuzz").bench_fuzz(command.inputs, command.readers, sample=command.sample)
+    elif command.what == "crlb":
+        _benchmark("crlb").bench_crlb(command.draws)
+    elif command.what == "throughput":
+        _benchmark("throughput").bench_throughput(command.device, command.objects)
+    elif command.what == "mujoco":
+        _benchmark("mujoco").bench_mujoco(command.seeds)
+    elif command.what == "reconstruct":
+        _benchmark("reconstruct").bench_reconstruct(quick=command.quick, sessions_only=command.sessions_only,
+                                                    names=command.names, noises=command.noise)
+    elif command.what == "push":
+        _benchmark("push").bench_push(command.seeds, engine=command.engine)
+    elif command.what == "push-real":
+        push = _benchmark("push")
+        if command.offsets_only:
+            push.bench_push_offsets()
+        else:
+            push.bench_push_real(blocks=command.blocks)
+    elif command.what == "push-mit":
+        _benchmark("push_mit").bench_push_mit()
+    elif command.what == "priors":
+        _benchmark("priors").bench_priors()
+    elif command.jointed_only:
+        _benchmark("paper_jointed").bench_paper_jointed(command.seeds, engine=command.engine)
+    else:
+        _benchmark("paper").bench_paper(command.seeds, paper_optimizer=command.paper_optimizer,
+                                        from_vlm_starts=command.vlm_starts, engine=command.engine)
 
 
 def entry() -> None:

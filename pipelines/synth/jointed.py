@@ -173,7 +173,7 @@ def joint_effect_vector(effect, friction: float) -> np.ndarray:
     return out
 
 
-def _reference(obj: JointedObject, config: JointedMotionConfig, rng: np.random.Generator):
+def joint_reference(obj: JointedObject, config: JointedMotionConfig, rng: np.random.Generator):
     """q_ref(t) and its two derivatives: faded in from q = 0 to the middle of the travel plus a multi-sine."""
     lo, hi = obj.travel
     mid = 0.5 * (lo + hi)
@@ -199,7 +199,7 @@ def _reference(obj: JointedObject, config: JointedMotionConfig, rng: np.random.G
     return reference
 
 
-def _smooth_noise(rng: np.random.Generator, dims: int, duration_s: float):
+def smooth_noise(rng: np.random.Generator, dims: int, duration_s: float):
     """Slowly varying signals in [-1, 1] per dimension (sums of 0.1-0.8 Hz sines)."""
     freqs = rng.uniform(0.1, 0.8, size=(dims, 3))
     phases = rng.uniform(0, 2 * np.pi, size=(dims, 3))
@@ -232,8 +232,8 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
     dynamics = wp.array([joint_dynamics(obj.joint_type, axis, origin, placement, inertial)], dtype=wp.vec3,
                         device=device)
 
-    reference = _reference(obj, config, rng)
-    constraint = _smooth_noise(rng, 6, config.duration_s)
+    reference = joint_reference(obj, config, rng)
+    constraint = smooth_noise(rng, 6, config.duration_s)
     m = inertial.mass
     I_body = inertial.inertia_matrix()
     handle = obj.handle()

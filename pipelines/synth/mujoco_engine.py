@@ -397,7 +397,7 @@ def simulate_jointed_mujoco(
     import mujoco
 
     # jointed.py imports warp when loaded; the held engine and the recording writer need none of it
-    from .jointed import JointedMotion, _reference, _smooth_noise
+    from .jointed import JointedMotion, joint_reference, smooth_noise
 
     inertial = obj.inertial()
     placement = obj.placement()
@@ -430,8 +430,8 @@ def simulate_jointed_mujoco(
     handle_site, ft_site = model.site("handle").id, model.site("ft").id
     f_sensor, t_sensor = model.sensor("ft_force").id, model.sensor("ft_torque").id
 
-    q_reference = _reference(obj, config, rng)
-    push = _smooth_noise(rng, 6, config.duration_s)
+    q_reference = joint_reference(obj, config, rng)
+    push = smooth_noise(rng, 6, config.duration_s)
     perp = np.linalg.svd(axis[None, :])[2][1:]
     k_lin, k_rot = servo.kp[0], servo.kp[3]
 

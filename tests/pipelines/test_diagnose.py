@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.diagnose import Case, record_case, true_model_fit
 from pipelines.diagnose import DiagnoseConfig, diagnose_held
+from pipelines.synth.effects import concealed_effect
 from pipelines.synth.held import ConcealedEffect, SensorNoise
-from twin.bench.diagnose import Case, concealed_effect, record_case, true_model_fit
 
 DURATION_S = 2.0
 CONFIG = DiagnoseConfig(bootstraps=10)
@@ -145,7 +146,7 @@ def test_predicts_better_needs_a_consistent_gain():
 def test_world_frame_bias_found_constant_in_world(tmp_path):
     """A bias added in world axes to world-frame wrench messages (MuJoCo's robot holding a cube) comes back
     in world axes, its force vector within 15 %, and the replay with it matches the truth model's."""
-    from twin.bench.diagnose_cases import record_mujoco_case
+    from benchmarks.diagnose_cases import record_mujoco_case
 
     effect = ConcealedEffect("sensor_bias", {"force": [0.06, -0.04, 0.03], "torque": [0.002, 0.001, -0.0015]})
     case = Case("cube", effect, 5.0, 11, "mujoco", "world")

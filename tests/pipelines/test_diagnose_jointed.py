@@ -5,15 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.diagnose import Case, record_joint_case, true_joint_model_fit
 from pipelines.diagnose import DiagnoseConfig, diagnose_jointed
+from pipelines.synth.effects import concealed_joint_effect
 from pipelines.synth.held import SensorNoise
 from pipelines.synth.jointed import jointed_paper_objects
-from twin.bench.diagnose import (
-    Case,
-    concealed_joint_effect,
-    record_joint_case,
-    true_joint_model_fit,
-)
 
 
 def test_concealed_door_spring_named_and_quantified(tmp_path):
@@ -43,7 +39,7 @@ def test_weak_drawer_damping_quantified_in_diagnose_windows(tmp_path):
     from dataclasses import replace
 
     from pipelines.identify.jointed import JointedConfig, identify_jointed
-    from twin.bench.diagnose import make_cases
+    from benchmarks.diagnose import make_cases
 
     case = make_cases(40, 10, 0)[11]
     assert (case.shape, case.effect.name) == ("drawer", "viscous_damping")

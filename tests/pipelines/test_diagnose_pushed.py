@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.push import box_izz
 from pipelines.diagnose import DiagnoseConfig, diagnose_pushed
 from pipelines.identify.sliding import PlanarBody, SlidingConfig
 from pipelines.logs import read_recording
 from pipelines.synth.push import PushConfig, write_push
-from twin.bench.push import box_izz
 
 HALF = (0.05, 0.05, 0.005)
 MASS = 0.75
@@ -108,9 +108,9 @@ def test_real_corner_push_whose_turn_no_friction_explains():
     """The MIT dataset's hexagon trial (known mass and I_zz): one window, no held-out recording, so no candidate
     can be tested; the window's turn against its pushing moment is reported as unexplained, with the I_zz that
     would balance it."""
+    from benchmarks.push import DATA
+    from benchmarks.push_mit import mit_body
     from pipelines.push_dataset import read_push_trial
-    from twin.bench.push import DATA
-    from twin.bench.push_mit import mit_body
 
     body, _ = mit_body(DATA, "hex")
     diagnosis, refit = diagnose_pushed([read_push_trial(HEX)], [], body, 0.4, SlidingConfig(),

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from twin.bench.fuzz import run_fuzz
-from twin.bench.fuzz_logs import LOG_TARGETS
+from benchmarks.fuzz import run_fuzz
+from benchmarks.fuzz_logs import LOG_TARGETS
 
 INPUTS = 500
 """Per reader: about a second each, the MCAP reader three."""

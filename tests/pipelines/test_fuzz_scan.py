@@ -12,8 +12,8 @@ import re
 
 import pytest
 
-from twin.bench.fuzz import run_fuzz
-from twin.bench.fuzz_scan import SCAN_TARGETS
+from benchmarks.fuzz import run_fuzz
+from benchmarks.fuzz_scan import SCAN_TARGETS
 
 COUNTS = {"scan-nerfstudio": 300, "scan-pose-free": 200, "scan-7scenes": 300, "mesh": 400}
 

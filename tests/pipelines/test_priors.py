@@ -202,7 +202,7 @@ def test_a_wildly_wrong_guess_is_discounted_by_the_heavy_tailed_likelihood():
 
 def test_bench_priors_bounds_hold_rigpi_truths_and_fusion_beats_the_paper_vlm(capsys):
     """`twin bench priors`: C holds all six truths; each fused cube prior is closer than the VLM answer it fused."""
-    from twin.bench.priors import bench_priors
+    from benchmarks.priors import bench_priors
 
     rows = bench_priors()
     priors = [r for r in rows if "mass_in_bounds" in r]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from assets.materials import material_range
+from benchmarks.paper_jointed import jointed_truth
 from pipelines.identify.jointed import identify_jointed, joint_effort
 from pipelines.identify.kind import detect_kind
 from pipelines.logs import read_recording
@@ -14,7 +15,6 @@ from pipelines.synth.held import SensorNoise
 from pipelines.synth.jointed import (
     JointedMotionConfig, jointed_paper_objects, simulate_jointed, write_jointed_recording,
 )
-from twin.bench.paper_jointed import jointed_truth
 
 
 def _recording(tmp_path: Path, name: str, seed: int, duration_s: float = 3.0):

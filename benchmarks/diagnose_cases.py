@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-EFFECTS = ("sensor_bias", "time_delay", "viscous_damping", "quadratic_drag", "nonuniform_density")
-JOINT_EFFECTS = ("viscous_damping", "spring", "stribeck_friction")
+from pipelines.synth.effects import EFFECTS, JOINT_EFFECTS, concealed_effect, concealed_joint_effect, joint_effort_noise
+
 FREE_OBJECTS = ("cube", "sphere")
 JOINT_OBJECTS = ("drawer", "cabinet_door", "oven_door")
 JOINT_DURATION_S = 8.0
@@ -43,10 +43,6 @@ MUJOCO_RATIO_RANGE = (1.0, 8.0)
 """The MuJoCo list's sizes: from the noise itself up, as the diagnosis's specification asks ("from barely above
 the noise to large"). Below it (0.5-0.85 x on a joint) even the model that made the recording replays the
 held-out one no better than the body without the effect, so no choice could be judged right or wrong."""
-SPEED_M_S = 0.15
-"""Typical speed of the COM in these motions [m/s], to turn a force ratio into damping and drag."""
-TURN_RAD_S = 2.0
-"""Typical angular speed [rad/s]."""
 
 
 @dataclass(frozen=True)
@@ -62,55 +58,6 @@ class Case:
     """The simulator that makes the recordings (ENGINES)."""
     wrench_frame: str = "gripper"
     """The wrench message's frame: "world", or the moving sensor's ("gripper"; a push's "sensor")."""
-
-
-def concealed_effect(name: str, ratio: float, rng: np.random.Generator, noise):
-    """A ConcealedEffect of `name` whose size is `ratio` times the sensor's noise (see module docstring)."""
-    from pipelines.synth.held import ConcealedEffect
-
-    direction = rng.normal(size=3)
-    direction /= np.linalg.norm(direction)
-    other = rng.normal(size=3)
-    other /= np.linalg.norm(other)
-    if name == "sensor_bias":
-        return ConcealedEffect(name, {"force": (ratio * noise.force_sigma_n * direction).tolist(),
-                                      "torque": (ratio * noise.torque_sigma_nm * other).tolist()})
-    if name == "time_delay":
-        return ConcealedEffect(name, {"seconds": float(rng.choice([-1, 1]) * ratio * 2e-3)})
-    if name == "viscous_damping":
-        return ConcealedEffect(name, {"b": ratio * noise.force_sigma_n / SPEED_M_S,
-                                      "b_angular": ratio * noise.torque_sigma_nm / TURN_RAD_S})
-    if name == "quadratic_drag":
-        return ConcealedEffect(name, {"c": ratio * noise.force_sigma_n / SPEED_M_S**2})
-    if name == "nonuniform_density":
-        return ConcealedEffect(name, {"com_shift": (ratio * 1e-3 * direction).tolist()})
-    raise ValueError(f"{name}: not an effect of a held body ({', '.join(EFFECTS)}); joint effects need --object")
-
-
-def joint_effort_noise(obj, noise) -> float:
-    """Per-sample noise of the joint effort [N or N m]: the force noise, times the handle's lever on a hinge."""
-    if obj.joint_type == "prismatic":
-        return noise.force_sigma_n
-    handle = np.asarray(obj.position_m) + np.asarray(obj.handle_m) - np.asarray(obj.origin_m)
-    return noise.force_sigma_n * float(np.linalg.norm(np.cross(obj.axis, handle)))
-
-
-def concealed_joint_effect(name: str, ratio: float, rng: np.random.Generator, obj, noise):
-    """A ConcealedEffect of `name` on `obj`'s joint whose size is `ratio` times its effort noise (see module
-    docstring)."""
-    from pipelines.synth.held import ConcealedEffect
-
-    sigma = joint_effort_noise(obj, noise)
-    travel = obj.travel[1] - obj.travel[0]
-    speed = 0.8 * travel
-    if name == "viscous_damping":
-        return ConcealedEffect(name, {"b": ratio * sigma / speed})
-    if name == "spring":
-        return ConcealedEffect(name, {"k": ratio * sigma / (travel / 4), "q0": float(rng.uniform(*obj.travel))})
-    if name == "stribeck_friction":
-        return ConcealedEffect(name, {"f_s": obj.friction + 5 * ratio * sigma, "f_c": obj.friction,
-                                      "v_s": float(speed * np.exp(rng.uniform(np.log(0.05), np.log(0.2))))})
-    raise ValueError(f"{name}: not a joint effect ({', '.join(JOINT_EFFECTS)})")
 
 
 def make_cases(concealed: int, clean: int, seed: int) -> list[Case]:
@@ -381,7 +328,7 @@ def record_push_case(case: Case, directory: Path):
     from pipelines.logs import read_recording
     from pipelines.synth.mujoco_push import write_pushed_mujoco
     from pipelines.synth.push import PushConfig
-    from twin.bench.push import box_izz
+    from benchmarks.push import box_izz
 
     rng = np.random.default_rng(case.seed)
     concealed = {}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from twin.bench.paper import _print_paper_table, engines, free_rows
+from benchmarks.paper import _print_paper_table, engines, free_rows
 
 
 def test_engine_choices_and_an_unknown_one():

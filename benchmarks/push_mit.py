@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.bench.push import DATA, net_yaw_deg
+from benchmarks.push import DATA, net_yaw_deg
 
 MIT_CONFIG = dict(dt_s=1e-4, moving_speed_m_s=1e-3)
 """SlidingConfig changes for the dataset's slow pushes: step [s] and the speed a window must exceed [m/s]."""
@@ -161,7 +161,7 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
         print(f"{s['pair']:16} {s['trials']:6d} {s['measured']:8d} {s['mu_mean']:7.3f} {s['mu_cv_pct']:7.2f} "
               f"{s['qs_mean']:7.3f} {s['qs_cv_pct']:7.2f}")
     if prediction:
-        from twin.bench.push import _plot_prediction
+        from benchmarks.push import plot_prediction
 
         print(f"\npredictive validity, leave one out: the motion replayed in {config.window_s} s windows from "
               "measured states, measured force and contact (pos, head), and the pushing wrench predicted from the "
@@ -173,7 +173,7 @@ def bench_push_mit(root: Path = DATA, figure: Path = Path("docs/push_prediction_
             print(f"{p['block']:16} {p['trial']:78} {p['mu_fit']:6.3f} {p['pos_mm']:7.2f} {p['pos_prior_mm']:8.2f} "
                   f"{p['heading_deg']:8.2f} {p['heading_prior_deg']:9.2f} {p['force_n']:7.3f} "
                   f"{p['force_prior_n']:7.3f}")
-        _plot_prediction(prediction, figure, "Held-out MIT pushing-dataset trials: object motion predicted from "
-                         "measured pusher force and contact point")
+        plot_prediction(prediction, figure, "Held-out MIT pushing-dataset trials: object motion predicted from "
+                        "measured pusher force and contact point")
         print(f"\nfigure: {figure}")
     return {"trials": rows, "summary": summary, "prediction": prediction}

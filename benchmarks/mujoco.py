@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .paper import _spread, paper_cases
+from .paper import paper_cases, spread
 
 SENSOR_POS, SENSOR_QUAT = "tracked_pos", "tracked_quat"
 WRENCH_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
@@ -356,7 +356,7 @@ def bench_mujoco(seeds: int = 5, duration_s: float = 10.0, sysid_configs: dict |
         truth = truths[name]
         if label == "twin kept":
             label = f"twin kept (Newton {sum(kept_newton[name])}/{len(kept_newton[name])})"
-        out.append({"object": name, "estimator": label, **_spread([(v[0], v[1]) for v in values], truth),
+        out.append({"object": name, "estimator": label, **spread([(v[0], v[1]) for v in values], truth),
                     **_widths(values, truth)})
     _print_table(out)
     return out

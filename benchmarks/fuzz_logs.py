@@ -20,7 +20,7 @@ from typing import Callable
 
 import numpy as np
 
-from twin.bench.fuzz import ODD_VALUES, FuzzTarget, mutate_bytes, mutate_json, mutate_json_doc
+from benchmarks.fuzz import ODD_VALUES, FuzzTarget, mutate_bytes, mutate_json, mutate_json_doc
 
 PUSH_TRIAL = "motion_surface=abs_shape=rect1_a=0_v=10_i=0.000_s=0.000_t=0.698"
 """A trial file's name as the dataset spells it (the reader parses it)."""

@@ -17,7 +17,7 @@ from pipelines.meshes import MeshError, read_mesh
 from pipelines.posing import PosingConfig, PosingError
 from pipelines.rgbd import ScanError
 from pipelines.scan import read_scan
-from twin.bench.fuzz import FuzzTarget, mutate_bytes, mutate_json
+from benchmarks.fuzz import FuzzTarget, mutate_bytes, mutate_json
 
 _SIZE = (32, 24)
 _FOCAL_PX = 30.0

@@ -32,7 +32,7 @@ def jointed_truth(obj) -> dict:
 def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0, engine: str = "both") -> list[dict]:
     """Each jointed object worked for `duration_s` twice (trial, held-out), recorded with `seeds` noise draws;
     kind, joint and physics found from the MCAP files as a build does. Prints one row per object and engine
-    (`twin.bench.paper.engines`): Newton's computed-effort robot or MuJoCo's servoed hand welded to the handle,
+    (`benchmarks.paper.engines`): Newton's computed-effort robot or MuJoCo's servoed hand welded to the handle,
     on the same joint reference and noise draws."""
     from assets.materials import material_range
     from pipelines.identify.jointed import identify_jointed
@@ -44,7 +44,7 @@ def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0, engine: str = "
         JointedMotionConfig, jointed_paper_objects, simulate_jointed, write_jointed_recording,
     )
     from pipelines.synth.mujoco_engine import simulate_jointed_mujoco
-    from twin.bench.paper import engines
+    from benchmarks.paper import engines
 
     simulators = {"newton": simulate_jointed, "mujoco": simulate_jointed_mujoco}
     rows = []

@@ -21,7 +21,7 @@ def test_sysid_recovers_held_cube_from_clean_recording(tmp_path):
     from pipelines.priors import uniform_density_prior
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
     from pipelines.synth.recording import write_recording
-    from twin.bench.mujoco import sysid_held
+    from benchmarks.mujoco import sysid_held
 
     mesh = trimesh.creation.box((0.04, 0.04, 0.04))
     mesh.density = 0.02 / mesh.volume

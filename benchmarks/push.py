@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-DATA = (Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "mit-push").resolve()
+DATA = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mit-push").resolve()
 
 
 def box_izz(mass_kg: float, half_extents_m) -> float:
@@ -461,7 +461,7 @@ def bench_push_real(root: Path = DATA, blocks: tuple[str, ...] = ()) -> dict:
     for p in prediction:
         print(f"{p['block']:14} {p['trial']:20} {p['mu_fit']:6.3f} {p['pos_mm']:7.2f} {p['pos_prior_mm']:8.2f} "
               f"{p['heading_deg']:8.2f} {p['heading_prior_deg']:9.2f}")
-    _plot_prediction(prediction, figure)
+    plot_prediction(prediction, figure)
     print(f"\nfigure: {figure}")
     return {"trials": trials, "summary": summary, "prediction": prediction}
 
@@ -520,9 +520,9 @@ def bench_push_offsets(root: Path = DATA) -> list[dict]:
     return rows
 
 
-def _plot_prediction(prediction: list[dict], figure: Path,
-                     title: str = "Held-out MIT block pushes: object motion predicted from measured pusher force "
-                                  "and contact point") -> None:
+def plot_prediction(prediction: list[dict], figure: Path,
+                    title: str = "Held-out MIT block pushes: object motion predicted from measured pusher force "
+                                 "and contact point") -> None:
     """Bars of position and heading RMSE (identified vs prior friction) and one trial's windows overlaid."""
     import matplotlib
 
@@ -556,75 +556,3 @@ def _plot_prediction(prediction: list[dict], figure: Path,
     fig.tight_layout()
     fig.savefig(figure, dpi=110)
     plt.close(fig)
-
-
-def bench_push_real_scene(root: Path = DATA, block: str = "Al_block", fitted: str = "Test_metal_1",
-                          held_out: str = "Test_metal_2", window_s: float = 0.5) -> list[dict]:
-    """A real block's exported scene.xml replaying a held-out bag in MuJoCo, per support model: fitted on
-    `fitted` (mu and I_zz, the mass the prior's), exported as a build exports it (the block's box as its
-    collision mesh, resting on a plane) and replayed on `held_out` in `window_s` windows from measured states
-    (`replay_pushed_mujoco`), beside Newton's replay of the same fit on the same windows (final sample and
-    all samples). A row per support model, marked where `choose_support` keeps it (BENCHMARKS.md, "Pushed
-    objects in MuJoCo: scene.xml")."""
-    import trimesh
-
-    from assets import Asset, Estimate, Geometry, Material, Pose, Theta
-    from exporters import export_all
-    from pipelines.identify.sliding import (
-        SUPPORTS, SlidingConfig, SlidingRollout, choose_support, estimate_force_bias, push_windows, replay_errors,
-    )
-    from pipelines.validate import replay_pushed_mujoco
-
-    spec = next(b for b in BLOCKS if b.folder == block)
-    bags = root / "ros2_mcap" / block
-    trial, heldout = read_block_trial(bags / fitted, spec), read_block_trial(bags / held_out, spec)
-    body, mu_prior = block_prior(spec)
-    half = np.asarray(spec.half_extents_m)
-    rows = []
-    config = SlidingConfig()
-    check = push_windows(heldout, body, config, estimate_force_bias(heldout, config))
-    windows = push_windows(trial, body, config, estimate_force_bias(trial, config))
-    choice, fits = choose_support(windows, check, body, mu_prior, config, SUPPORTS)
-    for support in SUPPORTS:
-        fit = fits[support]
-        support_config = replace(config, support=support)
-        mu, mass, izz = (float(v) for v in fit.theta)
-        with tempfile.TemporaryDirectory() as tmp:
-            out = Path(tmp)
-            (out / "meshes").mkdir()
-            box = trimesh.creation.box(extents=2 * half)
-            box.export(out / "meshes" / "visual.obj")
-            box.export(out / "meshes" / "collision_000.obj")
-            a, b, c = 2 * half
-            # the prior's box tensor scaled to the fitted I_zz, as a build scales it (physically consistent)
-            inertia = np.diag([b * b + c * c, a * a + c * c, a * a + b * b]) * izz / (a * a + b * b)
-            asset = Asset(
-                name="block", kind="sliding", placement=Pose((0.0, 0.0, half[2]), (0.0, 0.0, 0.0, 1.0)),
-                theta=Theta(mass=Estimate(mass, 0.0), com=Estimate((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
-                            inertia=Estimate(tuple(map(tuple, inertia)), None), friction=Estimate(mu, 0.0)),
-                geometry=Geometry("meshes/visual.obj", ("meshes/collision_000.obj",)),
-                material=Material(spec.material, mass / (8 * float(np.prod(half))), mu),
-                provenance={"identify": {"support": {"model": support}}})
-            paths = export_all(asset, out)
-            mujoco = replay_pushed_mujoco(paths.scene, asset, heldout, window_s, support_config)
-        check_config = replace(support_config, window_s=window_s)
-        replayed = push_windows(heldout, body, check_config, estimate_force_bias(heldout, check_config))
-        rollout = SlidingRollout(replayed, body, check_config)
-        residual = rollout.residuals(fit.theta)
-        newton_final = float(np.sqrt(np.mean(np.sum(residual[-1, :, :2] ** 2, axis=-1))))
-        rows.append({"support": support, "kept": support == choice.support, "mu": mu,
-                     "izz_over_prior": izz / body.izz_kgm2,
-                     "mujoco_final_mm": 1e3 * mujoco["rmse_final_position_m"],
-                     "mujoco_all_mm": 1e3 * mujoco["rmse_position_m"],
-                     "mujoco_heading_deg": float(np.degrees(mujoco["rmse_heading_rad"])),
-                     "newton_final_mm": 1e3 * newton_final,
-                     "newton_all_mm": 1e3 * replay_errors(rollout, fit.theta)[0], "why": choice.words})
-    print(f"{block}: fitted on {fitted}, {held_out} replayed in {window_s} s windows")
-    print(f"{'support':8} {'kept':4} {'mu':>6} {'Izz/prior':>9} {'MuJoCo final mm':>15} {'all mm':>6} "
-          f"{'head deg':>8} {'Newton final mm':>15} {'all mm':>6}")
-    for r in rows:
-        print(f"{r['support']:8} {'yes' if r['kept'] else '':4} {r['mu']:6.3f} {r['izz_over_prior']:9.2f} "
-              f"{r['mujoco_final_mm']:15.2f} {r['mujoco_all_mm']:6.2f} {r['mujoco_heading_deg']:8.2f} "
-              f"{r['newton_final_mm']:15.2f} {r['newton_all_mm']:6.2f}")
-    print(choice.words)
-    return rows

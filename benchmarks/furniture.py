@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.bench.reconstruct import NOISE_LEVELS
+from benchmarks.reconstruct import NOISE_LEVELS
 
 TARGETS = {"volume_pct": 15.0, "com_mm": 10.0}
 

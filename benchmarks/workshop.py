@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-WORKSHOP = Path(__file__).resolve().parents[3] / "shared" / "data" / "workshop-tools"
+WORKSHOP = Path(__file__).resolve().parents[2] / "shared" / "data" / "workshop-tools"
 WORKSHOP_TOOLS = ("Hammer", "Rubber Mallet", "Screwdriver", "Electronic Caliper", "Allen Key", "Adjustable Wrench")
 MIRROR = np.diag([1.0, 1.0, -1.0])
 """The workshop-tools simulations obey F = m (a + g) with g pointing down, which is Newton's law with

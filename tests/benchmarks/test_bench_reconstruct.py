@@ -1,4 +1,4 @@
-"""Tests of twin.bench.reconstruct's pieces: truth meshes from CAD shells, Chamfer distance, summary, depth noise."""
+"""Tests of benchmarks.reconstruct's pieces: truth meshes from CAD shells, Chamfer distance, summary, depth noise."""
 
 from __future__ import annotations
 
@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from twin.bench.reconstruct import (
+from benchmarks.reconstruct import (
     _chamfer,
     _hidden_space,
-    _plane_depth_errors,
     _rest,
     _summarise,
     _watertight_from_mm,
 )
+from benchmarks.reconstruct_real import plane_depth_errors
 
 
 def test_overlapping_open_shells_become_one_watertight_solid(tmp_path):
@@ -109,7 +109,7 @@ def test_summary_splits_by_size_and_counts_targets():
 
 def test_unknown_object_name_is_refused_with_the_choices(tmp_path):
     """--names with a name not in the run fails before any work, naming it and the objects to choose from."""
-    from twin.bench.reconstruct import bench_reconstruct
+    from benchmarks.reconstruct import bench_reconstruct
 
     with pytest.raises(ValueError, match=r"no object named 'Allen Kez'.*'cube 30 cm'"):
         bench_reconstruct(out_dir=tmp_path, data_root=tmp_path, sessions_only=True, names=("Allen Kez",))
@@ -129,7 +129,7 @@ def test_plane_depth_errors_recover_pixel_noise_and_waviness():
     rng = np.random.default_rng(0)
     noisy = depth + wave + rng.normal(0, 0.002, depth.shape)
     noisy[200:280, 280:360] -= 0.05  # a box 5 cm proud of the table
-    z, pixel, total = _plane_depth_errors(noisy, K)
+    z, pixel, total = plane_depth_errors(noisy, K)
     sigma = lambda e: 1.4826 * np.median(np.abs(e - np.median(e)))  # noqa: E731
     assert sigma(pixel) == pytest.approx(0.002, rel=0.1)
     assert sigma(total) == pytest.approx(np.sqrt(0.002**2 + 0.003**2 / 2), rel=0.15)

@@ -149,7 +149,7 @@ def run_fuzz(target: FuzzTarget, count: int, seed: int = 0) -> FuzzResult:
 
 def fuzz_targets() -> dict[str, FuzzTarget]:
     """Every reader the bench covers, by name."""
-    from twin.bench import fuzz_targets as targets
+    from benchmarks import fuzz_targets as targets
 
     return targets.TARGETS
 

@@ -135,7 +135,7 @@ def bench_crlb(draws: int = 20, duration_s: float = 10.0, knot_s: float = 0.025)
     from pipelines.identify.least_squares import newton_euler_regressor, object_frame_from_pi
     from pipelines.priors import uniform_density_prior
     from pipelines.synth.held import HeldMotionConfig, SensorNoise, measure, simulate_held
-    from twin.bench.paper import paper_objects
+    from benchmarks.paper import paper_objects
 
     noise = SensorNoise()
     var_f = noise.force_sigma_n**2 + noise.force_resolution_n**2 / 12

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from twin.bench.fuzz_logs import LOG_TARGETS
-from twin.bench.fuzz_scan import SCAN_TARGETS
+from benchmarks.fuzz_logs import LOG_TARGETS
+from benchmarks.fuzz_scan import SCAN_TARGETS
 
 TARGETS = {**SCAN_TARGETS, **LOG_TARGETS}

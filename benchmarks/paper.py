@@ -1,5 +1,5 @@
 """`twin bench paper`: RigPI's free objects (cube, sphere, apple), held and moved, several noise draws each;
-then its jointed ones (twin/bench/paper_jointed.py)."""
+then its jointed ones (benchmarks/paper_jointed.py)."""
 
 from __future__ import annotations
 
@@ -93,7 +93,7 @@ def vlm_starts(name: str, truth, prior) -> dict:
     masses, at the prior's density shape), and for every object 4x the mass with 28x the inertia, the
     far end of the paper's reported VLM errors (300 % in mass, 2700 % in inertia)."""
     from assets import Inertial
-    from twin.bench.priors import RIGPI_VLM_MASS
+    from benchmarks.priors import RIGPI_VLM_MASS
 
     starts = {model: Inertial(mass, prior.com, np.asarray(prior.inertia_matrix()) * mass / prior.mass)
               for model, mass in RIGPI_VLM_MASS.get(name, {}).items()}
@@ -110,7 +110,7 @@ def bench_paper(seeds: int = 5, duration_s: float = 10.0, paper_optimizer: bool 
     With `paper_optimizer`, RigPI's own scheme (plain pose loss, 1/100-scale gradient steps) also
     runs on the same windows, started from the prior. With `from_vlm_starts`, the Newton fit also
     runs alone from each of `vlm_starts` (no least-squares start)."""
-    from twin.bench.paper_jointed import bench_paper_jointed
+    from benchmarks.paper_jointed import bench_paper_jointed
 
     rows = free_rows(seeds, duration_s, paper_optimizer, from_vlm_starts, engine)
     _print_paper_table(rows)
@@ -153,11 +153,11 @@ def free_rows(seeds: int, duration_s: float, paper_optimizer: bool = False, from
     # the engines' rows of one object and estimator side by side
     pairs = dict.fromkeys((name, estimator) for name, estimator, _ in estimates)
     return [{"object": name, "estimator": estimator, "engine": sim,
-             **_spread(estimates[name, estimator, sim], truths[name])}
+             **spread(estimates[name, estimator, sim], truths[name])}
             for name, estimator in pairs for sim in engines(engine) if (name, estimator, sim) in estimates]
 
 
-def _spread(estimates, truth) -> dict:
+def spread(estimates, truth) -> dict:
     """Mean absolute and worst relative errors [%], COM error [mm], coefficient of variation [%], and how
     often the reported 95 % intervals of mass and Ixx, Iyy, Izz contain the truth."""
     values = [inertial for inertial, _ in estimates]

@@ -1,6 +1,6 @@
 """`twin bench diagnose`: recordings with a concealed effect (or none), shuffled; is the right one found?
 
-The cases and their recordings are made in `twin.bench.diagnose_cases` (by twin's own Newton code or by
+The cases and their recordings are made in `benchmarks.diagnose_cases` (by twin's own Newton code or by
 MuJoCo, `--engine`); this module diagnoses each as a user's build would and prints one row per case: what
 was concealed and what was found, the main parameter's error, the held-out replay before and after, the
 truth model's own replay on the same recording, and the body's parameters after the diagnosis against the
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.bench.diagnose_cases import (  # noqa: F401  (twin synth conceals with these)
+from benchmarks.diagnose_cases import (  # noqa: F401  (some re-exported)
     EFFECTS, FREE_OBJECTS, JOINT_EFFECTS, JOINT_OBJECTS, OOV_EFFECTS, Case, case_kind, concealed_effect,
     concealed_joint_effect, determined_quantity, joint_effort_noise, make_cases, make_mujoco_cases, overlaps,
     record_case, record_joint_case, record_mujoco_case, record_mujoco_joint_case, record_push_case,
@@ -260,7 +260,7 @@ def _summary(rows: list[dict]) -> None:
               f"range {min(floors):.2f}-{max(floors):.2f}")
 
 
-from twin.bench.workshop import MIRROR, WORKSHOP_TOOLS, workshop_recording  # noqa: E402
+from benchmarks.workshop import MIRROR, WORKSHOP_TOOLS, workshop_recording  # noqa: E402
 
 
 def bench_diagnose_workshop(seed: int = 0) -> list[dict]:
@@ -301,7 +301,7 @@ def bench_diagnose_push_real(blocks: tuple[str, ...] = (), seed: int = 0) -> lis
     and the held-out replay error before and after."""
     from pipelines.diagnose import DiagnoseConfig, diagnose_pushed
     from pipelines.identify.sliding import SlidingConfig, estimate_force_bias, push_windows
-    from twin.bench.push import BLOCKS, DATA, FREE, block_prior, read_block_trial
+    from benchmarks.push import BLOCKS, DATA, FREE, block_prior, read_block_trial
     from twin.report import diagnosis_plots
 
     known = tuple(b.folder for b in BLOCKS)
@@ -376,7 +376,7 @@ def bench_diagnose_push_synth(seeds: int = 3) -> list[dict]:
     from pipelines.identify.sliding import PlanarBody, SlidingConfig
     from pipelines.logs import read_recording
     from pipelines.synth.push import PushConfig, write_push
-    from twin.bench.push import box_izz
+    from benchmarks.push import box_izz
 
     half, mass = (0.05, 0.05, 0.005), 0.75
     body = PlanarBody(half, mass, box_izz(mass, half))
