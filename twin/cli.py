@@ -406,7 +406,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _dispatch(command) -> None:
     if not isinstance(command, (Build, Inspect)):  # a build checks its inputs first and loads warp after
-        from twin.build import quiet_warp
+        from twin.stages import quiet_warp
 
         quiet_warp()
     if isinstance(command, Build):
@@ -414,7 +414,7 @@ def _dispatch(command) -> None:
     elif isinstance(command, Inspect):
         _run_inspect(command)
     elif isinstance(command, Diagnose):
-        from twin.build import DiagnoseRunConfig, diagnose_output
+        from twin.diagnose import DiagnoseRunConfig, diagnose_output
 
         diagnose_output(DiagnoseRunConfig(command.output, command.logs, command.holdout, command.bootstraps),
                         log=_log)
