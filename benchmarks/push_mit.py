@@ -16,7 +16,7 @@ from measured states, against the prior's friction.
 The pushes are slow (10 mm/s pusher, the object sliding at 1-3 mm/s), so the
 simulation step is 0.1 ms: Newton's penalty friction sticks below mu g dt and
 lets a stuck body creep at F dt / m, both of which must stay below the object's
-speed for the fit to see Coulomb friction (sliding.py module docstring). Pushes
+speed for the fit to see Coulomb friction (pipelines.identify.sliding docstring). Pushes
 this slow are quasi-static: driven by the measured force, the simulated object
 sticks or runs away, so the fit may only bound mu (`sliding_windows`), and the
 wrench balance measures it.

@@ -40,7 +40,7 @@ identified mu:
 Support contacts. MuJoCo's mesh-plane (and box-plane) collision carries a flat
 face at its corners, which resists turning about twice as much as an evenly
 loaded face. The sliding identification chooses between the two from the pushes
-(pipelines/identify/sliding.py `choose_support`, asset.json → provenance →
+(pipelines/identify/sliding/pushed.py `choose_support`, asset.json → provenance →
 identify → support), and the export reproduces its choice (`support_points_m`):
 "corners", the collision meshes alone; "uniform", 16 support points in NAME.xml,
 spheres of 1 mm radius on a 4 x 4 grid over the bottom face (the
@@ -99,7 +99,8 @@ SUPPORT_POINT_DROP_M = 1e-3
 stays clear of a flat floor under the object's weight (MuJoCo's default contact sinks about 0.2 mm) and
 while a push tilts it, small beside any object's height."""
 _SUPPORT_GRID = 4
-"""Support points per side of the bottom face: the sliding identification's grid (pipelines/identify/sliding.py)."""
+"""Support points per side of the bottom face: the sliding identification's grid
+(pipelines/identify/sliding/body.py `support_points`)."""
 
 
 def _num(values) -> str:

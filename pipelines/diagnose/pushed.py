@@ -1,6 +1,6 @@
 """Diagnose a pushed object: what does the sliding model leave out?
 
-The sliding base model (pipelines/identify/sliding.py) is Coulomb friction of the
+The sliding base model (pipelines/identify/sliding/) is Coulomb friction of the
 support face, loaded as `SlidingConfig.support` says (uniformly, or at its
 corners: the build passes the support the identification chose from the pushes,
 so that a corner-carried object's extra turning resistance is not read as
