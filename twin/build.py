@@ -17,9 +17,9 @@ import numpy as np
 
 from assets import Pose, asset_to_json
 from exporters import export_all
-from pipelines.decompose import DecomposeConfig, decompose
+from pipelines.decompose import decompose
 from pipelines.meshes import read_mesh
-from pipelines.reconstruct import ReconstructConfig, reconstruct
+from pipelines.reconstruct import reconstruct
 from pipelines.scan import read_scan
 from pipelines.sessions import SessionsConfig, merge_sessions
 from twin.checks import check_build
@@ -56,7 +56,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     log(f"motion: {detection.kind}" + (" (--kind)" if detection.forced else f" (BIC {detection.bic})"))
     mesh_world, name, scan_stats = _reconstruct(config, source, timer, log)
     placement, mesh = _placed(mesh_world)
-    parts = timer.run("decompose", decompose, mesh, DecomposeConfig(), cache_dir=Path(config.cache_dir) / "coacd")
+    parts = timer.run("decompose", decompose, mesh, config.decompose, cache_dir=Path(config.cache_dir) / "coacd")
     name = config.name or name
     prior, choice = _prior(config, mesh, name, choice, timer, log)
     prepared = Prepared(config, trials, holdout, detection, mesh, placement, parts, prior, choice, name, scan_stats,
@@ -140,8 +140,7 @@ def _object_mesh(config: BuildConfig, source):
                  "voxel_size_m": rec.voxel_size_m, **rec.stats}
         return rec.mesh, source[0].name, stats
     scan = source[0]
-    reconstruct_config = ReconstructConfig()
-    rec = reconstruct(scan, reconstruct_config)
-    stats = {"config": asdict(reconstruct_config), "frames": len(scan.frames), "voxel_size_m": rec.voxel_size_m,
+    rec = reconstruct(scan, config.reconstruct)
+    stats = {"config": asdict(config.reconstruct), "frames": len(scan.frames), "voxel_size_m": rec.voxel_size_m,
              **rec.stats}
     return rec.mesh, scan.name, stats

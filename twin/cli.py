@@ -1,4 +1,5 @@
-"""The `twin` command: subcommands assembled from the stages' configurations."""
+"""The `twin` command: subcommands assembled from the stages' configurations, each stage's passed whole
+(`--reconstruct.*`, `--decompose.*`, `--diagnosis.*`)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,10 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
+
+from pipelines.decompose import DecomposeConfig
+from pipelines.diagnose import DiagnoseConfig
+from pipelines.reconstruct.config import ReconstructConfig
 
 
 @dataclass(frozen=True)
@@ -77,6 +82,12 @@ class Build:
     pushes (a 10 mm/s pusher moving the object at 1-3 mm/s), whose friction the wrench balance then measures."""
     diagnose: bool = True
     """Run the diagnose stage after identification (--no-diagnose skips it)."""
+    reconstruct: ReconstructConfig = ReconstructConfig()
+    """The scan's fusion, segmentation and closing (one scan session; merged sessions keep their own)."""
+    decompose: DecomposeConfig = DecomposeConfig()
+    """The collision geometry: CoACD's settings and the hull limits."""
+    diagnosis: DiagnoseConfig = DiagnoseConfig()
+    """The diagnose stage: screening, refits, the choice (a held body's replay windows are --window-s)."""
 
 
 @dataclass(frozen=True)
@@ -100,8 +111,8 @@ class Diagnose:
     """MCAP recording of an interaction; repeat for several trials."""
     holdout: Path | None = None
     """MCAP recording kept out of the fit; chooses among candidates (else time-blocked cross-validation)."""
-    bootstraps: int = 40
-    """Block-bootstrap resamples of the screening."""
+    diagnosis: DiagnoseConfig = DiagnoseConfig()
+    """The diagnose stage: screening, refits, the choice (a held body's replay windows are the build's)."""
 
 
 @dataclass(frozen=True)
@@ -252,7 +263,8 @@ def _run_build(args: Build) -> None:
         topics=_role_map(args.topic, "--topic"), frames=_role_map(args.frame, "--frame"),
         wrench_rotation_xyzw=args.wrench_rotation, wrench_reaction=args.wrench_reaction,
         push_min_speed_m_s=args.push_min_speed, diagnose=args.diagnose, force=args.force,
-        mesh_units=args.mesh_units, mass_kg=_weighed(args.mass),
+        mesh_units=args.mesh_units, mass_kg=_weighed(args.mass), reconstruct=args.reconstruct,
+        decompose=args.decompose, diagnosis=args.diagnosis,
     )
     build(config, log=_log)
 
@@ -416,7 +428,7 @@ def _dispatch(command) -> None:
     elif isinstance(command, Diagnose):
         from twin.diagnose import DiagnoseRunConfig, diagnose_output
 
-        diagnose_output(DiagnoseRunConfig(command.output, command.logs, command.holdout, command.bootstraps),
+        diagnose_output(DiagnoseRunConfig(command.output, command.logs, command.holdout, command.diagnosis),
                         log=_log)
     elif isinstance(command, Synth):
         _run_synth(command)

@@ -11,6 +11,7 @@ from typing import Callable
 import numpy as np
 
 from assets import Inertial, Pose, asset_to_json, read_asset, write_asset
+from pipelines.diagnose import DiagnoseConfig
 from twin.checks import check_recording_path
 from twin.report import write_report
 from twin.stages import BuildConfig, BuildError, StageTimer, log_diagnosis
@@ -23,7 +24,8 @@ class DiagnoseRunConfig:
     output: Path
     logs: tuple[Path, ...]
     holdout: Path | None = None
-    bootstraps: int = 40
+    diagnosis: DiagnoseConfig = DiagnoseConfig()
+    """A held body's replay windows are the ones it was built with."""
 
 
 def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = print) -> Path:
@@ -32,7 +34,7 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
     The identified parameters and exported files stay as built (`twin build` carries chosen effects into
     them); effects, unexplained and provenance.diagnose are replaced.
     """
-    from pipelines.diagnose import DiagnoseConfig, diagnose_held
+    from pipelines.diagnose import diagnose_held
 
     out = Path(config.output)
     if not (out / "asset.json").is_file():
@@ -80,17 +82,16 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
         from pipelines.diagnose import diagnose_pushed
 
         diagnosis, _ = timer.run("diagnose", diagnose_pushed, trials, [holdout] if holdout else [], body, mu_prior, sconfig,
-                                       DiagnoseConfig(bootstraps=config.bootstraps))
+                                 config.diagnosis)
     elif asset.joint is not None:
         joint = detect_kind(trials[0], asset.kind).joint
         diagnosis, _ = timer.run("diagnose", diagnose_jointed, trials, holdout, joint, asset.placement, prior, jconfig,
-                                        DiagnoseConfig(bootstraps=config.bootstraps))
+                                 config.diagnosis)
     else:
         prior = Inertial(uniform["mass_kg"], tuple(uniform["com_m"]), np.asarray(uniform["inertia_kg_m2"]))
         X_tracked_body = Pose(tuple(tracked["position"]), tuple(tracked["quaternion_xyzw"])).inverse()
         diagnosis = timer.run("diagnose", diagnose_held, trials, holdout, X_tracked_body, prior,
-                                  DiagnoseConfig(bootstraps=config.bootstraps,
-                                                 window_s=asset.fit.window_s if asset.fit else 0.1))
+                              replace(config.diagnosis, window_s=asset.fit.window_s if asset.fit else 0.1))
     log_diagnosis(diagnosis, log)
     run = {"logs": [str(p) for p in config.logs], "holdout": str(config.holdout) if config.holdout else None}
     asset = replace(asset, effects=diagnosis.effects, unexplained=diagnosis.unexplained,

@@ -15,7 +15,7 @@ from twin.stages import Identified, Prepared, body_asset, kind_hint, log_diagnos
 def held_asset(p: Prepared) -> Identified:
     """Identify the held object's inertia, diagnose what the model lacks (the refit with it kept), and
     combine a weighed mass."""
-    from pipelines.diagnose import CANDIDATES, DiagnoseConfig, diagnose_held
+    from pipelines.diagnose import CANDIDATES, diagnose_held
     from pipelines.identify import (
         IdentifyConfig, InertialBounds, identify_held, tracked_to_object, with_weighed_mass,
     )
@@ -38,7 +38,7 @@ def held_asset(p: Prepared) -> Identified:
     diagnosis = None
     if config.diagnose:
         diagnosis = timer.run("diagnose", diagnose_held, p.trials, p.holdout, X_tracked_body, prior.uniform,
-                              DiagnoseConfig(window_s=config.window_s))
+                              replace(config.diagnosis, window_s=config.window_s))
         log_diagnosis(diagnosis, log)
         if any(e.name in CANDIDATES for e in diagnosis.effects):
             # the identification lacked the effect, so its estimate is biased: the refit with it is kept

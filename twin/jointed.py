@@ -73,11 +73,11 @@ def jointed_asset(p: Prepared) -> Identified:
                                prior.inertial, holdout, jconfig)
     diagnosis, kept, diagnosis_skipped = None, identified, None
     if config.diagnose:
-        from pipelines.diagnose import DiagnoseConfig, diagnose_jointed
+        from pipelines.diagnose import diagnose_jointed
 
         try:
             diagnosis, refit = timer.run("diagnose", diagnose_jointed, p.trials, holdout, fit, p.placement,
-                                         prior.inertial, jconfig, DiagnoseConfig())
+                                         prior.inertial, jconfig, config.diagnosis)
         except ValueError as exc:  # e.g. trial halves too short for one window each: the identified build stands
             log(f"diagnose skipped: {exc}")
             diagnosis_skipped = str(exc)

@@ -16,7 +16,7 @@ from twin.stages import Identified, Prepared, body_asset, kind_hint, log_diagnos
 def pushed_asset(p: Prepared) -> Identified:
     """Identify the pushed object on the support its pushes choose, diagnose what the model lacks (the refit
     with it kept), and combine a weighed mass where the pushes left the mass to the prior."""
-    from pipelines.diagnose import DiagnoseConfig, diagnose_pushed
+    from pipelines.diagnose import diagnose_pushed
     from pipelines.identify.sliding import SUPPORTS, SlidingConfig, identify_pushed
 
     config, timer, log = p.config, p.timer, p.log
@@ -31,7 +31,7 @@ def pushed_asset(p: Prepared) -> Identified:
     diagnosis, refit = None, None
     if config.diagnose:
         diagnosis, refit = timer.run("diagnose", diagnose_pushed, p.trials, [p.holdout] if p.holdout else [], body,
-                                     mu_prior, sconfig, DiagnoseConfig())
+                                     mu_prior, sconfig, config.diagnosis)
         log_diagnosis(diagnosis, log)
     theta, fit, provenance, loss_history, traces = sliding_result(pushed, refit, diagnosis, body, p.prior)
     theta = weighed_where_prior(theta, config.mass_kg)

@@ -20,6 +20,9 @@ import numpy as np
 
 from assets import Asset, Estimate, Material
 from assets.materials import MATCH_THRESHOLD, match_material, material_range, suggest_materials
+from pipelines.decompose import DecomposeConfig
+from pipelines.diagnose import DiagnoseConfig
+from pipelines.reconstruct.config import ReconstructConfig
 from twin.summary import bounds_flags, doubtful_flags, dominated_flags
 from twin.write import mesh_geometry
 
@@ -75,6 +78,12 @@ class BuildConfig:
     """Length unit of a mesh SOURCE ("m", "cm", "mm", "in"); None: metres."""
     mass_kg: tuple[float, float] | None = None
     """The object's weighed mass and its standard uncertainty [kg], a measurement the fit uses."""
+    reconstruct: ReconstructConfig = ReconstructConfig()
+    """The scan's fusion and closing (a single scan session; merged sessions keep their own settings)."""
+    decompose: DecomposeConfig = DecomposeConfig()
+    """The collision geometry's convex decomposition (CoACD)."""
+    diagnosis: DiagnoseConfig = DiagnoseConfig()
+    """The diagnose stage's settings; a held body's replay windows are `window_s`."""
 
     def read(self, path: Path):
         """One recording, read with this build's topic, frame and rotation options (MCAP), or a

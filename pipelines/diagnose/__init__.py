@@ -1,15 +1,29 @@
-"""diagnose: locate where simulation and recordings disagree, name the missing physics, model it, choose on held-out data."""
+"""diagnose: locate where simulation and recordings disagree, name the missing physics, model it, choose on held-out data.
 
-from .effects import CANDIDATES, EFFECT_NAMES, NONUNIFORM_DENSITY, Candidate, main_magnitude
-from .joint import JOINT_CANDIDATES, diagnose_jointed, joint_effect_params, replay_fit
-from .pushed import PUSHED_CANDIDATES, diagnose_pushed
-from .residuals import ResidualAnalysis, analyse_residuals, describe
-from .screening import Screening, screen
-from .select import DiagnoseConfig, Diagnosis, diagnose_held, replay_held
+The settings (`DiagnoseConfig`) load at once; the rest loads on first use, because it brings Warp and Newton
+with it and the command line reads the settings to build its options.
+"""
 
-__all__ = [
-    "CANDIDATES", "Candidate", "DiagnoseConfig", "Diagnosis", "EFFECT_NAMES", "JOINT_CANDIDATES",
-    "NONUNIFORM_DENSITY", "PUSHED_CANDIDATES", "ResidualAnalysis", "Screening", "analyse_residuals", "describe",
-    "diagnose_held", "diagnose_jointed", "diagnose_pushed", "joint_effect_params", "main_magnitude",
-    "replay_fit", "replay_held", "screen",
-]
+from importlib import import_module
+
+from .config import DiagnoseConfig
+
+_WHERE = {
+    "CANDIDATES": "effects", "EFFECT_NAMES": "effects", "NONUNIFORM_DENSITY": "effects", "Candidate": "effects",
+    "main_magnitude": "effects",
+    "JOINT_CANDIDATES": "joint", "diagnose_jointed": "joint", "joint_effect_params": "joint", "replay_fit": "joint",
+    "PUSHED_CANDIDATES": "pushed", "diagnose_pushed": "pushed",
+    "ResidualAnalysis": "residuals", "analyse_residuals": "residuals", "describe": "residuals",
+    "Screening": "screening", "screen": "screening",
+    "Diagnosis": "select", "diagnose_held": "select", "replay_held": "select",
+}
+
+__all__ = ["DiagnoseConfig", *_WHERE]
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
+    globals()[name] = value
+    return value

@@ -34,7 +34,8 @@ from pipelines.identify.jointed import (
 
 from .residuals import analyse_joint_residual, describe, localise_joint_friction, unexplained
 from .screening import Library, fit_subset, screen
-from .select import DiagnoseConfig, Diagnosis, predicts_better
+from .config import DiagnoseConfig
+from .select import Diagnosis, predicts_better
 
 JOINT_CANDIDATES = tuple(JOINT_EFFECT_PARAMS)
 """Joint candidates in screening order."""

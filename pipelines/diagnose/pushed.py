@@ -42,7 +42,8 @@ from pipelines.identify.sliding import (
 
 from .residuals import analyse_planar_residual, describe, unexplained
 from .screening import Screening
-from .select import DiagnoseConfig, Diagnosis, predicts_better
+from .config import DiagnoseConfig
+from .select import Diagnosis, predicts_better
 
 PUSHED_CANDIDATES = ("sensor_bias", "viscous_damping", "time_delay", "contact_offset")
 """Candidates of the sliding kind, in the order they are tried."""

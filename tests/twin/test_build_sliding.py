@@ -55,7 +55,7 @@ def test_build_sliding_measures_friction_and_marks_the_mass_prior(tmp_path):
     assert asset["effects"] == [] and asset["provenance"]["diagnose"]["evaluation"] == "time-blocked cross-validation"
 
     # `twin diagnose` on the built asset reads the recording with the build's options and rewrites asset.json
-    proc = twin("diagnose", str(out), "--logs", str(tmp_path / "push.mcap"), "--bootstraps", "5")
+    proc = twin("diagnose", str(out), "--logs", str(tmp_path / "push.mcap"), "--diagnosis.bootstraps", "5")
     assert proc.returncode == 0, proc.stderr
     rediagnosed = json.loads((out / "asset.json").read_text())
     assert rediagnosed["provenance"]["diagnose"]["run"]["logs"] == [str(tmp_path / "push.mcap")]
