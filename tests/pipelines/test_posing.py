@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +16,6 @@ from pipelines.rgbd import ScanError
 from pipelines.scan import read_scan
 from pipelines.synth.render import RenderConfig, render_scan
 
-REAL_7SCENES = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd" / "7scenes_tsdf_demo_subset"
 
 # a hand-held sweep: 8 views over 80 degrees of one ring, so consecutive views overlap
 SWEEP = RenderConfig(
@@ -113,17 +111,10 @@ def test_frames_that_do_not_overlap_raise(sweep):
         estimate_poses([a])
 
 
-@pytest.mark.skipif(not REAL_7SCENES.is_dir(), reason="../shared/data is absent")
-def test_real_kinect_frames_are_posed(tmp_path):
+def test_real_kinect_frames_are_posed(kinect_frames):
     """Six real 7-Scenes frames (1/3 s apart) are posed within 1 deg and 3 cm of KinectFusion's motions."""
-    root = tmp_path / "kinect"
-    root.mkdir()
-    (root / "camera-intrinsics.txt").symlink_to(REAL_7SCENES / "camera-intrinsics.txt")
-    for n in range(0, 60, 10):
-        for suffix in ("color.jpg", "depth.png", "pose.txt"):
-            (root / f"frame-{n:06d}.{suffix}").symlink_to(REAL_7SCENES / f"frame-{n:06d}.{suffix}")
     config = PosingConfig(initial_guesses=("identity", "constant_velocity"), model_rounds=1)
-    scan = read_scan(root, poses="estimate", posing=config)
+    scan = read_scan(kinect_frames(range(0, 60, 10)), poses="estimate", posing=config)
     errors = pose_errors(_poses(scan), scan.given_T_world_camera)
     assert errors.relative_rotation_deg.max() < 1.0 and errors.relative_translation_m.max() < 0.03
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +12,6 @@ from pipelines.reconstruct import ReconstructConfig, ReconstructError, SceneConf
 from pipelines.scan import read_scan
 from pipelines.synth.render import RenderConfig, render_scan
 
-REAL_7SCENES = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd" / "7scenes_tsdf_demo_subset"
 
 # small and few images keep the tests fast; accuracy at full size is better (see the module docstring)
 FAST = RenderConfig(width=320, height=240, fx=300.0, fy=300.0, view_count=12)
@@ -102,16 +100,9 @@ def test_scene_fusion_keeps_table_and_object(rendered):
     assert scene.stats["frame_count"] == len(scan.frames) and scene.stats["tsdf_s_per_frame"] > 0
 
 
-@pytest.mark.skipif(not REAL_7SCENES.is_dir(), reason="../shared/data is absent")
-def test_real_kinect_frames_fuse_into_a_room(tmp_path):
+def test_real_kinect_frames_fuse_into_a_room(kinect_frames):
     """Five real 7-Scenes frames fused at 4 cm give one room-sized surface, metres across."""
-    root = tmp_path / "kinect"
-    root.mkdir()
-    (root / "camera-intrinsics.txt").symlink_to(REAL_7SCENES / "camera-intrinsics.txt")
-    for n in range(0, 50, 10):
-        for suffix in ("color.jpg", "depth.png", "pose.txt"):
-            (root / f"frame-{n:06d}.{suffix}").symlink_to(REAL_7SCENES / f"frame-{n:06d}.{suffix}")
-    scene = reconstruct_scene(read_scan(root), SceneConfig(voxel_size_m=0.04))
+    scene = reconstruct_scene(read_scan(kinect_frames(range(0, 50, 10))), SceneConfig(voxel_size_m=0.04))
     assert 1.5 < max(scene.mesh.extents) < 8.0 and len(scene.mesh.faces) > 2000
     assert scene.stats["pieces_kept"] <= 5  # one coherent surface, a few large pieces at most
 

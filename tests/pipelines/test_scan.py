@@ -258,7 +258,6 @@ def test_arrays_are_read_only(tmp_path):
 # ---------------------------------------------------------------------------------------------
 # 7-Scenes / tsdf-fusion layout
 
-REAL_7SCENES = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd" / "7scenes_tsdf_demo_subset"
 K_TEXT = "10 0 4\n0 11 3\n0 0 1\n"
 
 
@@ -459,16 +458,9 @@ def test_directory_of_neither_layout_raises(tmp_path):
         read_scan(tmp_path / "x")
 
 
-@pytest.mark.skipif(not REAL_7SCENES.is_dir(), reason="../shared/data is absent")
-def test_reads_real_kinect_frames(tmp_path):
+def test_reads_real_kinect_frames(kinect_frames):
     """Three real 7-Scenes Kinect frames read with K 585/320/240, 0.8-4 m depth and rigid camera-to-world poses."""
-    root = tmp_path / "kinect"
-    root.mkdir()
-    (root / "camera-intrinsics.txt").symlink_to(REAL_7SCENES / "camera-intrinsics.txt")
-    for n in (0, 10, 500):
-        for suffix in ("color.jpg", "depth.png", "pose.txt"):
-            name = f"frame-{n:06d}.{suffix}"
-            (root / name).symlink_to(REAL_7SCENES / name)
+    root = kinect_frames((0, 10, 500))
     scan = read_scan(root)
     assert scan.layout == "7scenes" and len(scan.frames) == 3
     intr = scan.intrinsics
@@ -479,7 +471,7 @@ def test_reads_real_kinect_frames(tmp_path):
         assert 0.7 < valid.size / frame.depth_m.size < 0.99
         R = frame.T_world_camera[:3, :3]
         np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-9)
-    raw = np.loadtxt(REAL_7SCENES / "frame-000500.pose.txt")
+    raw = np.loadtxt(root / "frame-000500.pose.txt")
     np.testing.assert_allclose(scan.frames[2].T_world_camera[:3, 3], raw[:3, 3])
     np.testing.assert_allclose(scan.frames[2].T_world_camera[:3, :3], raw[:3, :3], atol=1e-3)
 

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,15 +13,11 @@ REPO = Path(__file__).resolve().parents[2]
 SAMPLE = REPO / "samples" / "cube"
 
 
-def twin(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "twin.cli", *args], capture_output=True, text=True, cwd=REPO)
-
-
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
+def built(tmp_path_factory, run_twin):
     """The sample built once into a temporary out/."""
     out = tmp_path_factory.mktemp("build") / "out"
-    proc = twin("build", str(SAMPLE / "scan"), "--logs", str(SAMPLE / "trial.mcap"),
+    proc = run_twin("build", str(SAMPLE / "scan"), "--logs", str(SAMPLE / "trial.mcap"),
                 "--holdout", str(SAMPLE / "heldout.mcap"), "-o", str(out))
     assert proc.returncode == 0, proc.stderr
     return out
@@ -81,16 +75,16 @@ def existing_out(tmp_path):
     return out
 
 
-def test_truncated_mcap_fails_cleanly(tmp_path, existing_out):
+def test_truncated_mcap_fails_cleanly(tmp_path, existing_out, run_twin):
     """A truncated recording gives one error line naming it and leaves out/ untouched."""
     bad = tmp_path / "truncated.mcap"
     data = (SAMPLE / "trial.mcap").read_bytes()
     bad.write_bytes(data[: len(data) // 2])
-    proc = twin("build", str(SAMPLE / "scan"), "--logs", str(bad), "-o", str(existing_out))
+    proc = run_twin("build", str(SAMPLE / "scan"), "--logs", str(bad), "-o", str(existing_out))
     _assert_clean_failure(proc, "truncated.mcap", existing_out, "previous build")
 
 
-def test_mcap_without_wrench_fails_cleanly(tmp_path, existing_out):
+def test_mcap_without_wrench_fails_cleanly(tmp_path, existing_out, run_twin):
     """A recording with no wrench topic gives one error line saying so."""
     from pipelines.logs import read_recording
     from pipelines.synth.recording import write_recording
@@ -113,24 +107,24 @@ def test_mcap_without_wrench_fails_cleanly(tmp_path, existing_out):
                 ids[channel.id] = writer.register_channel(channel.topic, channel.message_encoding, sid)
             writer.add_message(ids[channel.id], message.log_time, message.data, message.publish_time)
         writer.finish()
-    proc = twin("build", str(SAMPLE / "scan"), "--logs", str(tmp_path / "no_wrench.mcap"), "-o", str(existing_out))
+    proc = run_twin("build", str(SAMPLE / "scan"), "--logs", str(tmp_path / "no_wrench.mcap"), "-o", str(existing_out))
     _assert_clean_failure(proc, "no_wrench.mcap", existing_out, "previous build")
     assert "wrench" in proc.stderr
 
 
-def test_scan_without_depth_fails_cleanly(tmp_path, existing_out):
+def test_scan_without_depth_fails_cleanly(tmp_path, existing_out, run_twin):
     """A scan directory whose depth images are missing gives one error line naming the file."""
     scan = tmp_path / "scan"
     shutil.copytree(SAMPLE / "scan", scan)
     shutil.rmtree(scan / "depth")
-    proc = twin("build", str(scan), "--logs", str(SAMPLE / "trial.mcap"), "-o", str(existing_out))
+    proc = run_twin("build", str(scan), "--logs", str(SAMPLE / "trial.mcap"), "-o", str(existing_out))
     _assert_clean_failure(proc, "depth", existing_out, "previous build")
 
 
-def test_build_from_a_mesh_file(tmp_path):
+def test_build_from_a_mesh_file(tmp_path, run_twin):
     """A watertight mesh is accepted as SOURCE; without the Newton fit the posterior recovers the mass."""
     out = tmp_path / "out"
-    proc = twin("build", str(SAMPLE / "truth_mesh.obj"), "--logs", str(SAMPLE / "trial.mcap"), "-o", str(out),
+    proc = run_twin("build", str(SAMPLE / "truth_mesh.obj"), "--logs", str(SAMPLE / "trial.mcap"), "-o", str(out),
                 "--method", "ls", "--material", "pla_printed")
     assert proc.returncode == 0, proc.stderr
     asset = json.loads((out / "asset.json").read_text())

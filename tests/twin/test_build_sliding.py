@@ -3,21 +3,12 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
 
-
-def twin(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "twin.cli", *args], capture_output=True, text=True, cwd=REPO)
-
-
-def test_build_sliding_measures_friction_and_marks_the_mass_prior(tmp_path):
+def test_build_sliding_measures_friction_and_marks_the_mass_prior(tmp_path, run_twin):
     """A steel plate pushed and turned: mu measured within 5 %, mass from the prior and marked so."""
     import trimesh
 
@@ -32,7 +23,7 @@ def test_build_sliding_measures_friction_and_marks_the_mass_prior(tmp_path):
     box.apply_translation([0.0, 0.0, half[2]])  # resting on the table at the world origin
     box.export(tmp_path / "plate.obj")
     out = tmp_path / "out"
-    proc = twin("build", str(tmp_path / "plate.obj"), "--logs", str(tmp_path / "push.mcap"), "--kind", "sliding",
+    proc = run_twin("build", str(tmp_path / "plate.obj"), "--logs", str(tmp_path / "push.mcap"), "--kind", "sliding",
                 "--material", "steel", "-o", str(out))
     assert proc.returncode == 0, proc.stderr
     asset = json.loads((out / "asset.json").read_text())
@@ -55,16 +46,16 @@ def test_build_sliding_measures_friction_and_marks_the_mass_prior(tmp_path):
     assert asset["effects"] == [] and asset["provenance"]["diagnose"]["evaluation"] == "time-blocked cross-validation"
 
     # `twin diagnose` on the built asset reads the recording with the build's options and rewrites asset.json
-    proc = twin("diagnose", str(out), "--logs", str(tmp_path / "push.mcap"), "--diagnosis.bootstraps", "5")
+    proc = run_twin("diagnose", str(out), "--logs", str(tmp_path / "push.mcap"), "--diagnosis.bootstraps", "5")
     assert proc.returncode == 0, proc.stderr
     rediagnosed = json.loads((out / "asset.json").read_text())
     assert rediagnosed["provenance"]["diagnose"]["run"]["logs"] == [str(tmp_path / "push.mcap")]
     assert rediagnosed["theta"] == asset["theta"]
 
 
-def test_malformed_topic_option_is_one_error_line(tmp_path):
+def test_malformed_topic_option_is_one_error_line(tmp_path, run_twin):
     """--topic without ROLE=/name names the option and exits 1."""
-    proc = twin("build", str(tmp_path / "x.obj"), "--logs", str(tmp_path / "y.mcap"), "--topic", "/netft_data")
+    proc = run_twin("build", str(tmp_path / "x.obj"), "--logs", str(tmp_path / "y.mcap"), "--topic", "/netft_data")
     assert proc.returncode == 1
     assert "twin: error: --topic '/netft_data': expected ROLE=VALUE" in proc.stderr
 
