@@ -180,7 +180,8 @@ class Bench:
     """Sample directory made by `twin synth` (scan/, trial.mcap, heldout.mcap, truth.json)."""
     methods: tuple[Literal["newton", "ls"], ...] = ("newton", "ls")
     seeds: int = 5
-    """Noise draws per object (paper, mujoco); seeds per case (diagnose --push-synth)."""
+    """Noise draws per object (paper, mujoco); seeds per case (diagnose --push-synth); scans per part and level
+    (furniture)."""
     blocks: tuple[str, ...] = ()
     """push-real, diagnose --push-real: block folders to run (St_block, Al_block, Plastic_block; default all)."""
     offsets_only: bool = False
@@ -472,7 +473,7 @@ def _run_bench(command: Bench) -> None:
         _benchmark("workshop").bench_workshop(command.seeds, command.levels, method=command.identify_with,
                                               parts=command.parts)
     elif command.what == "furniture":
-        _benchmark("furniture").bench_furniture(command.noise)
+        _benchmark("furniture").bench_furniture(command.noise, command.seeds)
     elif command.what == "fuzz":
         _benchmark("fuzz").bench_fuzz(command.inputs, command.readers, sample=command.sample)
     elif command.what == "crlb":

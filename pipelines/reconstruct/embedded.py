@@ -142,6 +142,27 @@ def _front(views: list[View], segmentation: Segmentation, config: ReconstructCon
     points = segmentation.object_points
     normal, offset, rms = fit_plane(points, max(0.002, 2.5 * noise), segmentation.footprint_m, cameras, config)
     front = _outline(views, segmentation, normal, offset, rms)
+    refined = _with_surroundings(front, views, segmentation, config)
+    if refined is not None:
+        return refined
+    # a narrow front under noisy depth (a drawer's 16 mm edge at 3 mm of noise) can tilt by tens of degrees,
+    # and then the band around its outline misses the carcass face; the cameras face the front, so the
+    # plane through the part facing their mean position starts the refinement again
+    centroid = points.mean(axis=0)
+    toward = cameras.mean(axis=0) - centroid
+    toward /= np.linalg.norm(toward)
+    offset = -float(toward @ centroid)
+    rms = float(np.sqrt(np.mean((points @ toward + offset) ** 2)))
+    refined = _with_surroundings(_outline(views, segmentation, toward, offset, rms), views, segmentation, config)
+    return refined if refined is not None else front
+
+
+def _with_surroundings(front: _Front, views: list[View], segmentation: Segmentation,
+                       config: ReconstructConfig) -> _Front | None:
+    """The front refitted, with its outline voted again, on the plane parallel to the surroundings' face that
+    lies around its outline; None where that face is not found there (too few points, or under half of
+    those near the front lie on one face)."""
+    noise = segmentation.depth_noise_m
     pixel_m = segmentation.stats["median_depth_m"] / float(np.mean([v.intrinsics.fx for v in views]))
     ring_gap, ring_width = _ring(pixel_m)
     spread = max(3.0 * noise, 0.002)
@@ -158,14 +179,14 @@ def _front(views: list[View], segmentation: Segmentation, config: ReconstructCon
     behind = front.behind(around)
     near = np.abs(behind) < max(0.1, 3.0 * noise)
     if len(face) < 30 or near.sum() < 30:
-        return front
+        return None
     step = np.median(behind[near])
     carcass = around[near & (np.abs(behind - step) < spread)]
     if len(carcass) < 0.5 * near.sum():
-        return front
+        return None
     scatter = np.concatenate([face - face.mean(axis=0), carcass - carcass.mean(axis=0)])
     refined = np.linalg.svd(scatter, full_matrices=False)[2][2]
-    refined *= np.sign(refined @ normal)
+    refined *= np.sign(refined @ front.normal)
     offset = -float(refined @ face.mean(axis=0))
     rms = float(np.sqrt(np.mean((face @ refined + offset) ** 2)))
     return _outline(views, segmentation, refined, offset, rms)
@@ -289,10 +310,13 @@ def _thickness(views: list[View], segmentation: Segmentation, front: _Front, con
         centre = float(np.median(pooled))
         spread = max(3.0 * noise, 0.002)
         share = float(np.mean(np.abs(pooled - centre) < spread))
-        per_view = [(_trimmed_mean(r[np.abs(r - centre) < spread]), np.sum(np.abs(r - centre) < spread))
-                    for r in rings if np.sum(np.abs(r - centre) < spread) >= 5]
-        if per_view and share >= 0.5:
-            values, weights = np.array([p[0] for p in per_view]), np.array([p[1] for p in per_view], float)
+        kept = [k for r in rings for k in [r[np.abs(r - centre) < spread]] if len(k) >= 5]
+        if kept and share >= 0.5:
+            # each view by its samples over its own scatter: a far view's depth is noisier (sigma grows as z^2),
+            # and over 10 scans of each furniture part and noise level this weighting lowered the RMS volume
+            # error in 5 of 6 (the smooth-noise oven door 11.1 -> 9.6 %), against the samples alone
+            values = np.array([_trimmed_mean(k) for k in kept])
+            weights = np.array([len(k) / ((1.4826 * np.median(np.abs(k - np.median(k)))) ** 2 + 1e-12) for k in kept])
             step = float(np.average(values, weights=weights))
             scatter = np.sqrt(np.average((values - step) ** 2, weights=weights))
             # views differ by their depth offsets and sampling more than the noise floor says; 0.1 mm
