@@ -3,6 +3,7 @@ from the motion and the wrench, its missing physics looked for, and the held-out
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
