@@ -102,6 +102,10 @@ class ReconstructConfig:
     carcass: 0.94-0.99) when at least this fraction of the pixels just outside its masks continue its surface
     in depth, and its lowest points are 10 mm clear of the plane. An object on a table continues into it
     along its footprint only (the bench's objects: 0.00-0.64; a hex key lying flat, 0.76, is not clear)."""
+    carcass_band_px: tuple[float, float] = (1.0, 3.0)
+    """An embedded part's carcass step is read from the pixels just outside each view's mask against those
+    just inside: the bands' gap from the mask's border and their width [pixels]. Narrow, so that depth noise
+    moving in patches cancels between them; wider bands read a 2 mm step 5 % thick or more."""
     panel_thickness_m: tuple[float, float] = (0.018, 0.006)
     """Thickness of an embedded part whose depth nothing shows [m]: value and standard uncertainty
     (cabinet doors and panels are 12-25 mm boards)."""

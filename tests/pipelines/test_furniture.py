@@ -80,3 +80,16 @@ def test_a_narrow_front_tilted_by_noise_is_set_right_by_the_carcass(tmp_path):
     truth.apply_translation(obj.position_m)
     assert abs(rec.stats["extent"]["front_normal"][0]) > 0.999  # the chest faces -x
     assert np.linalg.norm(rec.mesh.center_mass - truth.center_mass) < 0.010
+
+
+def test_a_two_millimetre_step_read_through_depth_noise_that_moves_in_patches(tmp_path):
+    """The oven door stands 2 mm proud of its oven; under the sensor-like depth noise (about 2.5 mm,
+    correlated over 16 pixels: the bench's "sensor" level, scan seed 0) the step read pixel for pixel across
+    each mask's border gives the volume within 15 % (the bands about the voted outline read 2.37 mm, +18.5 %)."""
+    obj = jointed_paper_objects()["oven_door"]
+    config = replace(FurnitureConfig(), render=replace(FurnitureConfig().render, depth_noise_base_m=0.00126,
+                                                       depth_noise_quadratic_per_m=0.00293,
+                                                       depth_noise_smoothing_px=8.0))
+    rec = reconstruct(read_scan(render_furniture_scan(obj, tmp_path / "oven", config, np.random.default_rng(0))))
+    assert rec.stats["extent"]["thickness_from"] == "carcass step"
+    assert rec.mesh.volume == pytest.approx(obj.mesh().volume, rel=0.15)
