@@ -55,12 +55,18 @@ def backproject(view: View, stride: int, max_depth_m: float) -> tuple[np.ndarray
     s = max(1, int(stride))
     rows = np.arange(s // 2, intr.height, s)
     cols = np.arange(s // 2, intr.width, s)
-    z = view.depth_m[np.ix_(rows, cols)].astype(np.float64)
-    u, v = np.meshgrid(cols + 0.5, rows + 0.5)
+    v, u = (a.ravel() for a in np.meshgrid(rows, cols, indexing="ij"))
+    z = view.depth_m[v, u]
     ok = (z > 0) & (z <= max_depth_m)
-    z, u, v = z[ok], u[ok], v[ok]
-    p = np.stack([(u - intr.cx) / intr.fx * z, (v - intr.cy) / intr.fy * z, z], axis=1)
-    T = view.T_world_camera
-    points = p @ T[:3, :3].T + T[:3, 3]
-    flags = view.mask[np.ix_(rows, cols)][ok] if view.mask is not None else np.zeros(len(points), bool)
+    points = pixel_points(view, v[ok], u[ok])
+    flags = view.mask[v[ok], u[ok]] if view.mask is not None else np.zeros(len(points), bool)
     return points, flags
+
+
+def pixel_points(view: View, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """World points [m] of the pixels (rows, cols) from their depth, rays through the pixel centres."""
+    intr = view.intrinsics
+    z = view.depth_m[rows, cols].astype(np.float64)
+    p = np.stack([(cols + 0.5 - intr.cx) / intr.fx * z, (rows + 0.5 - intr.cy) / intr.fy * z, z], axis=1)
+    T = view.T_world_camera
+    return p @ T[:3, :3].T + T[:3, 3]
