@@ -1,4 +1,4 @@
-"""Fixtures the test tree shares: the checkout's samples, the public data beside it, the command line."""
+"""Fixtures the test tree shares: the public data beside the checkout, real Kinect frames from it, the command line."""
 
 from __future__ import annotations
 
@@ -10,12 +10,6 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = (REPO / ".." / "shared" / "data").resolve()
-
-
-@pytest.fixture(scope="session")
-def samples() -> Path:
-    """The bundled samples (samples/cube, samples/drawer)."""
-    return REPO / "samples"
 
 
 @pytest.fixture(scope="session")

@@ -289,10 +289,8 @@ def _thickness(views: list[View], segmentation: Segmentation, front: _Front, con
         points, flags = backproject(view, stride, config.depth_trunc_m)
         index, on_grid = front.cells(points)
         behind = front.behind(points)
-        inside = front.depth_in.reshape(-1)[index]
-        inner = flags & on_grid & (inside > ring_gap) & (inside < ring_gap + ring_width)
         bands = _mask_bands(view, front, config)
-        if inner.sum() < 10 or bands is None:
+        if bands is None:
             continue
         front_band, carcass_band = bands
         f_v = _trimmed_mean(front_band)
@@ -300,7 +298,7 @@ def _thickness(views: list[View], segmentation: Segmentation, front: _Front, con
         fronts.append(f_v)
         edge = flags & on_grid & (front.depth_in.reshape(-1)[index] <= ring_gap)
         edges.append(behind[edge] - f_v)
-        counts.append(int(inner.sum()))
+        counts.append(len(front_band) / stride**2)  # as many as the stride-sampled edge points would hold
     pooled = np.concatenate(rings) if rings else np.empty(0)
     ring_count = sum(len(r) for r in rings)
     step = step_std = share = None
