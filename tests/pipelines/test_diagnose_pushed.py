@@ -1,5 +1,6 @@
 """The pushed-object diagnosis on synthetic pushes (a concealed drag is found and improves the held-out
-prediction; a clean push reports nothing) and on a real push whose turn no friction explains."""
+prediction; tests/twin/test_build_sliding.py holds a clean push's silence) and on a real push whose turn no
+friction explains."""
 
 from __future__ import annotations
 
@@ -48,13 +49,6 @@ def test_concealed_drag_is_found_and_improves_the_held_out_push(dragged):
     traces = diagnosis.traces
     assert len(traces["t_s"]) == len(traces["after_position"]) == len(traces["residual_after"])
     assert np.asarray(traces["residual_before"]).shape[1] == 3
-
-
-def test_clean_push_reports_nothing(tmp_path):
-    trial, held = _pushes(tmp_path)
-    diagnosis, refit = diagnose_pushed([trial], [held], _body(), 0.5, SlidingConfig(), DiagnoseConfig(bootstraps=20))
-    assert diagnosis.effects == () and refit is None
-    assert diagnosis.fits["after"] == diagnosis.fits["before"]
 
 
 def test_stretches_end_with_their_recording_and_a_spread_mismatch_is_unexplained():

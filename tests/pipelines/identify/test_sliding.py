@@ -322,14 +322,3 @@ def test_support_chosen_by_the_pushes_that_predict_better(tmp_path, engine, expe
     support = pushed.provenance()["support"]
     assert support["model"] == expected and support["why"].startswith(f"support {expected!r}")
     assert pushed.provenance()["config"]["support"] == expected
-
-
-def test_support_chosen_on_trial_halves_without_a_holdout(push_recording):
-    """Without a held-out recording each half of the trial's windows is predicted from the other's fit."""
-    from pipelines.identify.sliding import SUPPORTS, identify_pushed
-
-    rec, config = push_recording
-    pushed = identify_pushed([rec], None, _box(0.7), 0.5, SlidingConfig(), supports=SUPPORTS)
-    assert pushed.support.evaluated_on == "trial halves"
-    assert pushed.config.support == pushed.support.support == "uniform"
-    assert pushed.fit.theta[0] == pytest.approx(config.mu, rel=0.05)
