@@ -31,11 +31,12 @@ from pipelines.identify.jointed import (
     JOINT_EFFECT_PARAMS, STRIBECK_SPEEDS, JointedConfig, equation_of_motion_rows, identify_jointed, joint_body,
     joint_effect_columns, q_and_position_rmse, replay_jointed,
 )
+from pipelines.identify.windows import predicts_better
 
 from .residuals import analyse_joint_residual, describe, localise_joint_friction, unexplained
 from .screening import Library, fit_subset, screen
 from .config import DiagnoseConfig
-from .select import Diagnosis, predicts_better
+from .select import Diagnosis
 
 JOINT_CANDIDATES = tuple(JOINT_EFFECT_PARAMS)
 """Joint candidates in screening order."""

@@ -39,11 +39,12 @@ from pipelines.identify.sliding import (
     EFFECT_SLOTS, PlanarBody, PushWindows, SlidingConfig, SlidingFit, SlidingRollout, concat_push_windows,
     estimate_force_bias, identify_sliding, push_windows, turn_check,
 )
+from pipelines.identify.windows import predicts_better
 
 from .residuals import analyse_planar_residual, describe, unexplained
 from .screening import Screening
 from .config import DiagnoseConfig
-from .select import Diagnosis, predicts_better
+from .select import Diagnosis
 
 PUSHED_CANDIDATES = ("sensor_bias", "viscous_damping", "time_delay", "contact_offset")
 """Candidates of the sliding kind, in the order they are tried."""

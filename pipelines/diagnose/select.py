@@ -30,7 +30,7 @@ from pipelines.identify.inertia import nearest_physical_inertia, theta_from_phys
 from pipelines.identify.least_squares import NewtonEulerRows, newton_euler_rows, object_frame_from_pi
 from pipelines.identify.noise import recording_noise_levels, renoised
 from pipelines.identify.rollout import FreeBodyRollout
-from pipelines.identify.windows import concat_windows, make_windows
+from pipelines.identify.windows import concat_windows, make_windows, predicts_better
 
 from .config import DiagnoseConfig
 from .effects import CANDIDATES, NONUNIFORM_DENSITY, bias_in_tracked_axes, effect_vector, framed_rows, remove_bias
@@ -75,14 +75,6 @@ class Diagnosis:
             **({"noise_floor": self.noise_floor} if self.noise_floor is not None else {}),
             **({"doubtful": list(self.doubtful)} if self.doubtful else {}),
         }
-
-
-def predicts_better(mse: np.ndarray, reference: np.ndarray) -> bool:
-    """Whether per-window errors `mse` beat `reference`'s by more than twice the standard error of the paired
-    difference (windows are nearly independent), the rule the identification keeps its Newton fit by. The
-    difference is of log errors: one window that diverges must not outweigh all the others."""
-    d = np.log(np.maximum(mse, 1e-300)) - np.log(np.maximum(reference, 1e-300))
-    return bool(d.mean() + 2 * d.std(ddof=1) / np.sqrt(len(d)) < 0)
 
 
 def noise_floor(evaluation, replay, fit: FitMetrics, rng: np.random.Generator, draws: int = 4) -> dict:

@@ -44,7 +44,7 @@ from pipelines.sim.joint import (
 )
 
 from .kind import JointFit, joint_coordinates
-from .windows import lowpass
+from .windows import lowpass, predicts_better
 
 __all__ = ["JOINT_EFFECT_PARAMS", "JointedConfig", "JointedIdentification", "equation_of_motion_rows",
            "identify_jointed", "joint_body", "joint_effect_columns", "joint_effort", "replay_jointed"]
@@ -114,7 +114,8 @@ class JointedIdentification:
     fits: dict = field(default_factory=dict)
     loss_history: tuple[float, ...] = ()
     selected: str = "newton"
-    """"newton" or "least_squares": the one that predicts the held-out recording better (newton without one)."""
+    """"newton", or "least_squares" where it predicts the held-out recording clearly better (`predicts_better`;
+    newton without one)."""
     traces: dict | None = None
     """Held-out replay: "t_s", "measured", "prior", "kept" q [m or rad], each [S, W] (None without a held-out)."""
 
@@ -532,7 +533,11 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
         replays = {name: replay_jointed(holdout, joint, placement, prior, body, values, config)
                    for name, values in (("prior", body.prior_values(0.0)), ("least_squares", x_ls), ("newton", p))}
         fits["holdout"] = {name: replay[0] for name, replay in replays.items()}
-        if fits["holdout"]["least_squares"]["rmse_q"] < fits["holdout"]["newton"]["rmse_q"]:
+        # only a clear gain: replays start from measured states, whose noise dominates their error. On MuJoCo's
+        # oven door a held-out error 15 % lower at 1.2 standard errors came with an axis inertia 6 % off
+        # against the Newton fit's 3 %.
+        measured = replays["newton"][2].q[1:]
+        if predicts_better(*(np.mean((replays[n][1] - measured) ** 2, axis=0) for n in ("least_squares", "newton"))):
             selected, p, covariance = "least_squares", x_ls, cov_ls
         _, q_prior, w = replays["prior"]
         traces = {"t_s": w.t_s, "measured": w.q[1:], "prior": q_prior, "kept": replays[selected][1]}

@@ -194,3 +194,12 @@ def concat_windows(parts: list[ShootingWindows]) -> ShootingWindows:
         measured_quat_xyzw=np.concatenate([p.measured_quat_xyzw for p in parts], axis=1),
         start_twist=np.concatenate([p.start_twist for p in parts], axis=0),
     )
+
+
+def predicts_better(mse: np.ndarray, reference: np.ndarray) -> bool:
+    """Whether per-window errors `mse` beat `reference`'s by more than twice the standard error of the paired
+    difference (windows are nearly independent): the rule by which a jointed identification replaces its Newton fit
+    and the diagnosis keeps a candidate. The difference is of log errors: one window that diverges must not
+    outweigh all the others."""
+    d = np.log(np.maximum(mse, 1e-300)) - np.log(np.maximum(reference, 1e-300))
+    return bool(d.mean() + 2 * d.std(ddof=1) / np.sqrt(len(d)) < 0)

@@ -131,7 +131,7 @@ def test_mismatch_no_candidate_explains_is_localised(tmp_path_factory):
 
 def test_predicts_better_needs_a_consistent_gain():
     """A model is better only where most windows agree: not by a tie, nor by one window's gain."""
-    from pipelines.diagnose.select import predicts_better
+    from pipelines.identify.windows import predicts_better
 
     rng = np.random.default_rng(0)
     reference = rng.uniform(1e-7, 2e-7, 30)
