@@ -3,6 +3,7 @@
 - `assets` depends on nothing of ours; no stage of `pipelines` imports `twin`; nothing in the product
   imports the test-data generator (`pipelines.synth`) or the benchmarks;
 - no module imports another module's private (underscore) name;
+- the product reaches identification through its face, `pipelines.identify`, never into its modules;
 - no module-level import cycle (imports inside functions are allowed to defer heavy libraries);
 - no source file over 600 lines.
 """
@@ -73,6 +74,12 @@ def test_no_private_names_across_modules():
     wrong = [f"{module} imports {name} from {target}" for module in MODULES for target, name in _imports(module)
              if name.startswith("_") and not name.startswith("__") and target != module]
     assert not wrong, "\n".join(wrong)
+
+
+def test_identification_reached_through_its_face():
+    inside = [f"{m} -> {t}" for m in MODULES if m.split(".")[0] in PRODUCT and not m.startswith("pipelines.identify")
+              for t, _ in _imports(m) if t.startswith("pipelines.identify.")]
+    assert not inside, "import from pipelines.identify instead:\n" + "\n".join(inside)
 
 
 def test_no_import_cycle_at_module_level():

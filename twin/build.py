@@ -44,7 +44,7 @@ def build(config: BuildConfig, log: Callable[[str], None] = print) -> Path:
     """Run every stage and write config.output atomically; returns the output directory."""
     check_build(config)  # within the first second, before the heavy imports
     quiet_warp()
-    from pipelines.identify.kind import detect_kind
+    from pipelines.identify import detect_kind
 
     timer = StageTimer(log)
     # The inputs are read first: they are quick, and a bad file should fail before minutes of geometry.

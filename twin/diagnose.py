@@ -58,7 +58,7 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
     holdout = reader.read(config.holdout) if config.holdout else None
     try:
         if asset.kind == "sliding":
-            from pipelines.identify.sliding import PlanarBody, SlidingConfig
+            from pipelines.identify import PlanarBody, SlidingConfig
 
             identified = provenance["identify"]
             body = PlanarBody(**{k: tuple(v) if isinstance(v, list) else v for k, v in identified["body"].items()})
@@ -67,8 +67,7 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
             mu_prior = identified["prior_theta"][0]
         elif asset.joint is not None:
             from pipelines.diagnose import diagnose_jointed
-            from pipelines.identify.jointed import JointedConfig
-            from pipelines.identify.kind import detect_kind
+            from pipelines.identify import JointedConfig, detect_kind
 
             p = provenance["prior"]
             prior = Inertial(p["mass_kg"], tuple(p["com_m"]), np.asarray(p["inertia_kg_m2"]))

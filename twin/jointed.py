@@ -62,8 +62,9 @@ def jointed_theta(identified, prior, joint_type: str):
 def jointed_asset(p: Prepared) -> Identified:
     """Identify the part on its joint, look for missing passive joint forces; the asset exports base + part +
     joint, its validation reloads them, its replay runs the held-out trial in MuJoCo."""
-    from pipelines.identify.jointed import JointedConfig, identify_jointed, joint_windows, q_and_position_rmse
-    from pipelines.identify.kind import joint_coordinates
+    from pipelines.identify import (
+        JointedConfig, identify_jointed, joint_coordinates, joint_windows, q_and_position_rmse,
+    )
 
     config, prior, timer, log, holdout = p.config, p.prior, p.timer, p.log, p.holdout
     fit = p.detection.joint

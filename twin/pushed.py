@@ -17,7 +17,7 @@ def pushed_asset(p: Prepared) -> Identified:
     """Identify the pushed object on the support its pushes choose, diagnose what the model lacks (the refit
     with it kept), and combine a weighed mass where the pushes left the mass to the prior."""
     from pipelines.diagnose import diagnose_pushed
-    from pipelines.identify.sliding import SUPPORTS, SlidingConfig, identify_pushed
+    from pipelines.identify import SUPPORTS, SlidingConfig, identify_pushed
 
     config, timer, log = p.config, p.timer, p.log
     body, mu_prior = sliding_body(p.mesh, p.prior)
@@ -59,7 +59,7 @@ def sliding_body(mesh_object, prior):
     The support face is the mesh's bounding box bottom (object frame, axes parallel to world at the scan);
     mass and I_zz spreads from the bounds C, taken as about +-2 std of the log.
     """
-    from pipelines.identify.sliding import PlanarBody
+    from pipelines.identify import PlanarBody
 
     mass_rel = float(np.log(prior.upper[0] / prior.lower[0]) / 4)
     izz_rel = float(np.log(prior.upper[6] / prior.lower[6]) / 4)
@@ -108,7 +108,7 @@ def sliding_friction(fit, balance, prior):
     """The friction coefficient and what gave it (`measured_friction`); where neither the sliding fit nor the
     wrench balance measured it, the prior raised to the fit's bound, marked "prior" with the bound as its
     interval's low end."""
-    from pipelines.identify.sliding import measured_friction
+    from pipelines.identify import measured_friction
 
     measured = measured_friction(fit, balance)
     if measured is not None:

@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from assets import Fit, Pose
     from assets.recording import Recording
     from pipelines.decompose import ConvexParts
-    from pipelines.identify.kind import KindDetection
+    from pipelines.identify import KindDetection
     from pipelines.priors import Prior
 
 

@@ -26,8 +26,7 @@ from typing import Callable, Literal
 
 import numpy as np
 
-from pipelines.identify.kernels import EFFECT_SIZE
-from pipelines.identify.least_squares import NewtonEulerRows
+from pipelines.identify import EFFECT_SIZE, NewtonEulerRows
 
 Belongs = Literal["object", "recording"]
 

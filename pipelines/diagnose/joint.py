@@ -27,11 +27,10 @@ from dataclasses import replace
 import numpy as np
 
 from assets import Effect, FitMetrics
-from pipelines.identify.jointed import (
+from pipelines.identify import (
     JOINT_EFFECT_PARAMS, STRIBECK_SPEEDS, JointedConfig, equation_of_motion_rows, identify_jointed, joint_body,
-    joint_effect_columns, q_and_position_rmse, replay_jointed,
+    joint_effect_columns, predicts_better, q_and_position_rmse, replay_jointed,
 )
-from pipelines.identify.windows import predicts_better
 
 from .residuals import analyse_joint_residual, describe, localise_joint_friction, unexplained
 from .screening import Library, fit_subset, screen

@@ -34,12 +34,10 @@ from pathlib import Path
 import numpy as np
 
 from assets import Effect, FitMetrics
-from pipelines.identify.noise import estimate_noise_levels
-from pipelines.identify.sliding import (
+from pipelines.identify import (
     EFFECT_SLOTS, PlanarBody, PushWindows, SlidingConfig, SlidingFit, SlidingRollout, concat_push_windows,
-    estimate_force_bias, identify_sliding, push_windows, turn_check,
+    estimate_force_bias, estimate_noise_levels, identify_sliding, predicts_better, push_windows, turn_check,
 )
-from pipelines.identify.windows import predicts_better
 
 from .residuals import analyse_planar_residual, describe, unexplained
 from .screening import Screening

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 from scipy.stats import chi2
 
-from pipelines.identify.least_squares import NewtonEulerRows
+from pipelines.identify import NewtonEulerRows
 
 CHANNELS = ("fx", "fy", "fz", "tx", "ty", "tz")
 PLANAR_CHANNELS = ("x", "y", "heading")

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipelines.identify.least_squares import NewtonEulerRows
+from pipelines.identify import NewtonEulerRows
 
 from .effects import CANDIDATES
 

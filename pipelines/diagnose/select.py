@@ -25,12 +25,10 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from assets import Effect, FitMetrics, Inertial, Pose
-from pipelines.identify.free_body import IdentifyConfig
-from pipelines.identify.inertia import nearest_physical_inertia, theta_from_physical
-from pipelines.identify.least_squares import NewtonEulerRows, newton_euler_rows, object_frame_from_pi
-from pipelines.identify.noise import recording_noise_levels, renoised
-from pipelines.identify.rollout import FreeBodyRollout
-from pipelines.identify.windows import concat_windows, make_windows, predicts_better
+from pipelines.identify import (
+    FreeBodyRollout, IdentifyConfig, NewtonEulerRows, concat_windows, make_windows, nearest_physical_inertia,
+    newton_euler_rows, object_frame_from_pi, predicts_better, recording_noise_levels, renoised, theta_from_physical,
+)
 
 from .config import DiagnoseConfig
 from .effects import CANDIDATES, NONUNIFORM_DENSITY, bias_in_tracked_axes, effect_vector, framed_rows, remove_bias

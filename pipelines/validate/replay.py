@@ -20,7 +20,7 @@ def replay_jointed_mujoco(mjcf_path: Path, asset: Asset, recording, joint_fit, c
     as MuJoCo models them (`frictionloss`, `damping`). RMSE of q and of the tracked frame's position."""
     import mujoco
 
-    from pipelines.identify.jointed import JointedConfig, joint_windows, q_and_position_rmse
+    from pipelines.identify import JointedConfig, joint_windows, q_and_position_rmse
 
     config = config or JointedConfig()
     w = joint_windows(recording, joint_fit, config)
@@ -55,7 +55,7 @@ def replay_held_mujoco(mjcf_path: Path, asset: Asset, recording, X_tracked_body,
     import mujoco
     from scipy.spatial.transform import Rotation
 
-    from pipelines.identify.windows import make_windows
+    from pipelines.identify import make_windows
 
     pose, wrench = recording.pose, recording.wrench
     w = make_windows(pose.t_s, pose.position, pose.quat_xyzw, wrench.t_s, wrench.force, wrench.torque,
@@ -119,7 +119,7 @@ def replay_pushed_mujoco(scene_path: Path, asset: Asset, recording, window_s: fl
     import mujoco
     import trimesh
 
-    from pipelines.identify.sliding import PlanarBody
+    from pipelines.identify import PlanarBody
 
     scene_path = Path(scene_path)
     model = mujoco.MjModel.from_xml_path(str(scene_path))
@@ -142,7 +142,7 @@ def replay_pushed_model(model, body_name: str, planar, recording, window_s: floa
     import mujoco
     from scipy.spatial.transform import Rotation
 
-    from pipelines.identify.sliding import SlidingConfig, estimate_force_bias, push_windows
+    from pipelines.identify import SlidingConfig, estimate_force_bias, push_windows
 
     data = mujoco.MjData(model)
     body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body_name)
