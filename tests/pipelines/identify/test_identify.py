@@ -41,6 +41,33 @@ def test_log_cholesky_round_trip_and_always_physical():
         assert Inertial(m, c, I).physical_violation() is None
 
 
+def test_a_link_without_a_joint_moves_as_a_free_jointed_body(recording, monkeypatch):
+    """The rollouts build their bodies as links: SemiImplicit must move them bit for bit as it moves add_body's
+    free-jointed bodies (residuals and tape gradients equal), since the joint only costs launches."""
+    import newton
+
+    truth, data = recording
+    windows = make_windows(*data, window_s=0.05, substeps=5, t_begin_s=1.0, t_end_s=1.2)
+    theta = theta_from_physical(1.3 * MASS, truth.com, 1.2 * INERTIA)[None]
+    weight = np.full((windows.sample_count, 6), 1.0)
+    link = FreeBodyRollout(windows, GRASP.inverse())
+    assert link.model.joint_count == 0
+    add_link = newton.ModelBuilder.add_link
+
+    def add_free_jointed(builder, **body):  # what add_body does
+        link = add_link(builder, **body)
+        builder.add_articulation([builder.add_joint_free(child=link)])
+        return link
+
+    monkeypatch.setattr(newton.ModelBuilder, "add_link", add_free_jointed)
+    jointed = FreeBodyRollout(windows, GRASP.inverse())
+    assert jointed.model.joint_count == windows.window_count
+    np.testing.assert_array_equal(link.residuals(theta), jointed.residuals(theta))
+    for a, b in zip(link.loss_and_grad(theta, None, None, weight, True),
+                    jointed.loss_and_grad(theta, None, None, weight, True)):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_parameter_sets_run_side_by_side(recording):
     """Three parameter sets in one rollout give each set's own residuals, loss and gradient; a forward-only
     rollout (two alternating states) gives the same residuals."""
