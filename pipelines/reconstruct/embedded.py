@@ -286,13 +286,13 @@ def _thickness(views: list[View], segmentation: Segmentation, front: _Front, con
     band = max(0.1, 3.0 * noise)  # surroundings further than this from the front plane are not its carcass
     fronts, rings, edges, counts = [], [], [], []
     for view in views:
-        points, flags = backproject(view, stride, config.depth_trunc_m)
-        index, on_grid = front.cells(points)
-        behind = front.behind(points)
         bands = _mask_bands(view, front, config)
         if bands is None:
             continue
         front_band, carcass_band = bands
+        points, flags = backproject(view, stride, config.depth_trunc_m)
+        index, on_grid = front.cells(points)
+        behind = front.behind(points)
         f_v = _trimmed_mean(front_band)
         rings.append(carcass_band[np.abs(carcass_band - f_v) < band] - f_v)
         fronts.append(f_v)

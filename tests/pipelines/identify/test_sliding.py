@@ -307,7 +307,6 @@ def test_corner_support_chosen_by_the_held_out_push_it_predicts_better(tmp_path)
     from pipelines.identify.sliding import SUPPORTS, identify_pushed
     from pipelines.synth.mujoco_push import write_pushed_mujoco
 
-    expected = "corners"
     trial = PushConfig(mu=0.35, mass_kg=0.8, offset_m=0.02, yaw0_rad=0.1, push_s=1.2, seed=2)
     paths = [tmp_path / "trial.mcap", tmp_path / "heldout.mcap"]
     write_pushed_mujoco(paths[0], trial)
@@ -315,10 +314,10 @@ def test_corner_support_chosen_by_the_held_out_push_it_predicts_better(tmp_path)
     trial_rec, heldout = (read_recording(p) for p in paths)
     body = _box(0.8)
     pushed = identify_pushed([trial_rec], heldout, body, 0.5, SlidingConfig(), supports=SUPPORTS)
-    assert pushed.config.support == expected and pushed.support.support == expected
+    assert pushed.config.support == pushed.support.support == "corners"
     assert pushed.support.evaluated_on == "held-out recording"
-    assert pushed.support.loss_m2[expected] < min(v for k, v in pushed.support.loss_m2.items() if k != expected)
+    assert pushed.support.loss_m2["corners"] < min(v for k, v in pushed.support.loss_m2.items() if k != "corners")
     assert pushed.fit.theta[0] == pytest.approx(0.35, rel=0.08)
     support = pushed.provenance()["support"]
-    assert support["model"] == expected and support["why"].startswith(f"support {expected!r}")
-    assert pushed.provenance()["config"]["support"] == expected
+    assert support["model"] == "corners" and support["why"].startswith("support 'corners'")
+    assert pushed.provenance()["config"]["support"] == "corners"
