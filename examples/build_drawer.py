@@ -54,6 +54,9 @@ def main(out: Path | None = None, test: bool = False) -> None:
         assert len(doc["provenance"]["validation"]) == 5 and files_present
         assert replay["mujoco"]["rmse_position_m"] < 0.005 and replay["newton"]["rmse_position_m"] < 0.005
         assert doc["effects"] == [], "a clean drawer's diagnosis names nothing"
+        identify = doc["provenance"]["identify"]
+        kept = {"newton": "Newton fit: ", "least_squares": "least-squares fit: "}[identify["selected"]]
+        assert identify["choice"].startswith(kept) and "two standard errors" in identify["choice"], identify["choice"]
 
 
 if __name__ == "__main__":

@@ -118,6 +118,8 @@ class JointedIdentification:
     newton without one)."""
     traces: dict | None = None
     """Held-out replay: "t_s", "measured", "prior", "kept" q [m or rad], each [S, W] (None without a held-out)."""
+    choice: str = ""
+    """The estimate kept and why, in words."""
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])
@@ -133,6 +135,7 @@ class JointedIdentification:
             "least_squares": self.least_squares,
             "fits": self.fits,
             "selected": self.selected,
+            "choice": self.choice,
             "loss_history": list(self.loss_history),
         }
 
@@ -529,6 +532,7 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
 
     fits = {"window_s": config.window_s, "trial_rmse_q": float(np.sqrt(np.mean(r * r)))}
     selected, traces = "newton", None
+    choice = "Newton fit: no held-out recording (--holdout) to test least squares against it"
     if holdout is not None:
         replays = {name: replay_jointed(holdout, joint, placement, prior, body, values, config)
                    for name, values in (("prior", body.prior_values(0.0)), ("least_squares", x_ls), ("newton", p))}
@@ -537,12 +541,18 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
         # oven door a held-out error 15 % lower at 1.2 standard errors came with an axis inertia 6 % off
         # against the Newton fit's 3 %.
         measured = replays["newton"][2].q[1:]
+        errors = ", ".join(f"{label} {1000 * fits['holdout'][name]['rmse_position_m']:.3f} mm"
+                           for name, label in (("newton", "Newton fit"), ("least_squares", "least squares")))
         if predicts_better(*(np.mean((replays[n][1] - measured) ** 2, axis=0) for n in ("least_squares", "newton"))):
             selected, p, covariance = "least_squares", x_ls, cov_ls
+            choice = f"least-squares fit: it predicts the held-out recording better by two standard errors ({errors})"
+        else:
+            choice = (f"Newton fit: least squares does not predict the held-out recording better by two standard "
+                      f"errors ({errors})")
         _, q_prior, w = replays["prior"]
         traces = {"t_s": w.t_s, "measured": w.q[1:], "prior": q_prior, "kept": replays[selected][1]}
     return JointedIdentification(body.names, p, covariance, least_squares, body.inertial(p), body.basis,
-                                 fits, tuple(history), selected, traces)
+                                 fits, tuple(history), selected, traces, choice)
 
 
 def replay_jointed(recording, joint, placement, prior, body: _BodyMap, p, config: JointedConfig):
