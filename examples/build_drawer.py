@@ -5,6 +5,7 @@ The drawer (samples/drawer: RigPI's drawer on its slide, pulled by a robot, Newt
 part mesh with a cabinet as the fixed base: the kind of motion is found from the trial, the Featherstone fit
 measures the mass and the joint friction (the COM and inertia stay the geometry prior's, which one slide cannot
 tell), the exports are written and read back, and the held-out recording is replayed in Newton and in MuJoCo.
+`twin diagnose` then runs the diagnosis again on the built output, from the part the build recorded.
 
     python examples/build_drawer.py [OUT]          # builds into OUT (default: a temporary folder) and prints
     python examples/build_drawer.py --test         # and asserts it (tests/test_examples.py)
@@ -19,7 +20,7 @@ from pathlib import Path
 
 import trimesh
 
-from twin.build import BuildConfig, build
+from twin.build import BuildConfig, DiagnoseRunConfig, build, diagnose_output
 
 SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "drawer"
 
@@ -34,6 +35,9 @@ def main(out: Path | None = None, test: bool = False) -> None:
                           base_mesh=cabinet, output=out), log=print)
         doc = json.loads((out / "asset.json").read_text())
         files_present = all((out / doc["files"][k]).is_file() for k in ("urdf", "mjcf", "usd", "report"))
+        # `twin diagnose` later, on the same recordings: the part as the build recorded it, the same diagnosis
+        diagnose_output(DiagnoseRunConfig(out, (SAMPLE / "trial.mcap",), SAMPLE / "heldout.mcap"), log=print)
+        again = json.loads((out / "asset.json").read_text())["provenance"]["diagnose"]
     truth = json.loads((SAMPLE / "truth.json").read_text())
     theta, joint, replay = doc["theta"], doc["joint"], doc["provenance"]["heldout_replay"]
     mass_err = theta["mass"]["value"] / truth["mass"] - 1
@@ -54,6 +58,8 @@ def main(out: Path | None = None, test: bool = False) -> None:
         assert len(doc["provenance"]["validation"]) == 5 and files_present
         assert replay["mujoco"]["rmse_position_m"] < 0.005 and replay["newton"]["rmse_position_m"] < 0.005
         assert doc["effects"] == [], "a clean drawer's diagnosis names nothing"
+        built = doc["provenance"]["diagnose"]
+        assert (again["scores"], again["fits"]) == (built["scores"], built["fits"]), "the same part, the same diagnosis"
         identify = doc["provenance"]["identify"]
         kept = {"newton": "Newton fit: ", "least_squares": "least-squares fit: "}[identify["selected"]]
         assert identify["choice"].startswith(kept) and "two standard errors" in identify["choice"], identify["choice"]

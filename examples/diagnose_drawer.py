@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from assets.materials import material_range
-from pipelines.diagnose import DiagnoseConfig, diagnose_jointed
-from pipelines.identify.kind import detect_kind
+from pipelines.diagnose import DiagnoseConfig, diagnose
+from pipelines.identify import JointedConfig, JointedPart, detect_kind
 from pipelines.logs import read_recording
 from pipelines.priors import uniform_density_prior
 from pipelines.synth.effects import concealed_joint_effect
@@ -49,7 +49,8 @@ def main(test: bool = False) -> None:
         drawer, effect, (trial, heldout) = record(Path(tmp))
     joint = detect_kind(trial).joint  # the slide's axis and type, from the motion alone
     prior = uniform_density_prior(drawer.mesh(), material_range(None)).inertial
-    diagnosis, refit = diagnose_jointed([trial], heldout, joint, drawer.placement(), prior, config=DiagnoseConfig())
+    part = JointedPart(joint, drawer.placement(), prior, JointedConfig())
+    diagnosis, refit = diagnose(part, [trial], heldout, DiagnoseConfig())
     truth = effect.params["b"]
     print(f"hidden: viscous_damping b = {truth:.3f} N s/m")
     for found in diagnosis.effects:

@@ -8,9 +8,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
-
-from assets import Inertial, Pose, asset_to_json, read_asset, write_asset
+from assets import asset_to_json, read_asset, write_asset
 from pipelines.diagnose import DiagnoseConfig
 from twin.checks import check_recording_path
 from twin.report import write_report
@@ -25,7 +23,6 @@ class DiagnoseRunConfig:
     logs: tuple[Path, ...]
     holdout: Path | None = None
     diagnosis: DiagnoseConfig = DiagnoseConfig()
-    """A held body's replay windows are the ones it was built with."""
 
 
 def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = print) -> Path:
@@ -34,7 +31,8 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
     The identified parameters and exported files stay as built (`twin build` carries chosen effects into
     them); effects, unexplained and provenance.diagnose are replaced.
     """
-    from pipelines.diagnose import diagnose_held
+    from pipelines.diagnose import diagnose
+    from pipelines.identify import subject_from_json
 
     out = Path(config.output)
     if not (out / "asset.json").is_file():
@@ -46,55 +44,25 @@ def diagnose_output(config: DiagnoseRunConfig, log: Callable[[str], None] = prin
     if config.holdout:
         check_recording_path(config.holdout, "--holdout")
     asset = read_asset(out / "asset.json")
+    try:
+        subject = subject_from_json(asset.provenance["subject"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise BuildError(f"{out}/asset.json: provenance holds no readable subject ({exc}); rebuild it with this "
+                         "version of twin") from exc
     timer = StageTimer(log)
-    provenance = asset.provenance
     # the recordings are read with the options the asset was built with (topics, frames, sensor rotation)
-    built = provenance.get("config", {})
+    built = asset.provenance.get("config", {})
     reader = BuildConfig(source=out, logs=(), topics=tuple(map(tuple, built.get("topics", ()))),
                          frames=tuple(map(tuple, built.get("frames", ()))),
                          wrench_rotation_xyzw=built.get("wrench_rotation_xyzw"),
                          wrench_reaction=bool(built.get("wrench_reaction", False)))
     trials = [reader.read(p) for p in config.logs]
     holdout = reader.read(config.holdout) if config.holdout else None
-    try:
-        if asset.kind == "sliding":
-            from pipelines.identify import PlanarBody, SlidingConfig
-
-            identified = provenance["identify"]
-            body = PlanarBody(**{k: tuple(v) if isinstance(v, list) else v for k, v in identified["body"].items()})
-            sconfig = SlidingConfig(**{k: tuple(v) if isinstance(v, list) else v
-                                       for k, v in identified["config"].items()})
-            mu_prior = identified["prior_theta"][0]
-        elif asset.joint is not None:
-            from pipelines.diagnose import diagnose_jointed
-            from pipelines.identify import JointedConfig, detect_kind
-
-            p = provenance["prior"]
-            prior = Inertial(p["mass_kg"], tuple(p["com_m"]), np.asarray(p["inertia_kg_m2"]))
-            jconfig = JointedConfig(**provenance["identify"]["config"])
-        else:
-            uniform = provenance["prior"]["uniform"]
-            tracked = provenance["tracked_frame_in_object"]
-    except KeyError as exc:
-        raise BuildError(f"{out}/asset.json: provenance lacks {exc}; rebuild it with this version of twin") from exc
-    if asset.kind == "sliding":
-        from pipelines.diagnose import diagnose_pushed
-
-        diagnosis, _ = timer.run("diagnose", diagnose_pushed, trials, [holdout] if holdout else [], body, mu_prior, sconfig,
-                                 config.diagnosis)
-    elif asset.joint is not None:
-        joint = detect_kind(trials[0], asset.kind).joint
-        diagnosis, _ = timer.run("diagnose", diagnose_jointed, trials, holdout, joint, asset.placement, prior, jconfig,
-                                 config.diagnosis)
-    else:
-        prior = Inertial(uniform["mass_kg"], tuple(uniform["com_m"]), np.asarray(uniform["inertia_kg_m2"]))
-        X_tracked_body = Pose(tuple(tracked["position"]), tuple(tracked["quaternion_xyzw"])).inverse()
-        diagnosis = timer.run("diagnose", diagnose_held, trials, holdout, X_tracked_body, prior,
-                              replace(config.diagnosis, window_s=asset.fit.window_s if asset.fit else 0.1))
+    diagnosis, _ = timer.run("diagnose", diagnose, subject, trials, holdout, config.diagnosis)
     log_diagnosis(diagnosis, log)
     run = {"logs": [str(p) for p in config.logs], "holdout": str(config.holdout) if config.holdout else None}
     asset = replace(asset, effects=diagnosis.effects, unexplained=diagnosis.unexplained,
-                          provenance={**provenance, "diagnose": diagnosis.provenance() | {"run": run}})
+                    provenance={**asset.provenance, "diagnose": diagnosis.provenance() | {"run": run}})
     # written beside and moved over: a reader, or an interrupt, sees the old files or the new ones
     with tempfile.TemporaryDirectory(prefix=".twin-", dir=out) as tmp:
         write_asset(asset, Path(tmp) / "asset.json")

@@ -3,7 +3,6 @@ from the motion and the wrench, its missing physics looked for, and the held-out
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,9 +15,9 @@ from twin.stages import Identified, Prepared, body_asset, kind_hint, log_diagnos
 def held_asset(p: Prepared) -> Identified:
     """Identify the held object's inertia, diagnose what the model lacks (the refit with it kept), and
     combine a weighed mass."""
-    from pipelines.diagnose import CANDIDATES, diagnose_held
+    from pipelines.diagnose import diagnose
     from pipelines.identify import (
-        IdentifyConfig, InertialBounds, identify_held, tracked_to_object, with_weighed_mass,
+        HeldBody, IdentifyConfig, InertialBounds, identify_held, tracked_to_object, with_weighed_mass,
     )
     from pipelines.priors import part_pseudo_inertias
 
@@ -36,14 +35,14 @@ def held_asset(p: Prepared) -> Identified:
     inertial, covariance = held.inertial, held.covariance
     dominated = set(held.prior_dominated)
     fit_baseline, fit_final = held.fits["baseline"], held.fits[held.selected]
+    subject = HeldBody(X_tracked_body, prior.uniform, config.window_s)
     diagnosis = None
     if config.diagnose:
-        diagnosis = timer.run("diagnose", diagnose_held, p.trials, p.holdout, X_tracked_body, prior.uniform,
-                              replace(config.diagnosis, window_s=config.window_s))
+        diagnosis, refit = timer.run("diagnose", diagnose, subject, p.trials, p.holdout, config.diagnosis)
         log_diagnosis(diagnosis, log)
-        if any(e.name in CANDIDATES for e in diagnosis.effects):
+        if refit is not None:
             # the identification lacked the effect, so its estimate is biased: the refit with it is kept
-            inertial, fit_final = diagnosis.inertial["after"], diagnosis.fits["after"]
+            inertial, fit_final = refit, diagnosis.fits["after"]
             fit_baseline = diagnosis.fits["before"]
             dominated = set()
 
@@ -55,8 +54,7 @@ def held_asset(p: Prepared) -> Identified:
     provenance = {
         "identify": {"method": config.method, **held.provenance()},
         **({"diagnose": diagnosis.provenance()} if diagnosis else {}),
-        "tracked_frame_in_object": {"position": list(X_tracked_body.inverse().position),
-                                    "quaternion_xyzw": list(X_tracked_body.inverse().quaternion_xyzw)},
+        "subject": subject.to_json(),
     }
     recording = p.holdout or p.trials[0]
 

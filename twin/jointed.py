@@ -63,22 +63,22 @@ def jointed_asset(p: Prepared) -> Identified:
     """Identify the part on its joint, look for missing passive joint forces; the asset exports base + part +
     joint, its validation reloads them, its replay runs the held-out trial in MuJoCo."""
     from pipelines.identify import (
-        JointedConfig, identify_jointed, joint_coordinates, joint_windows, q_and_position_rmse,
+        JointedConfig, JointedPart, identify_jointed, joint_coordinates, joint_windows, q_and_position_rmse,
     )
 
     config, prior, timer, log, holdout = p.config, p.prior, p.timer, p.log, p.holdout
     fit = p.detection.joint
     jconfig = JointedConfig()
+    subject = JointedPart(fit, p.placement, prior.inertial, jconfig)
     with kind_hint(p.detection, p.trials[0]):
         identified = timer.run("identify (Featherstone)", identify_jointed, p.trials, fit, p.placement,
                                prior.inertial, holdout, jconfig)
     diagnosis, kept, diagnosis_skipped = None, identified, None
     if config.diagnose:
-        from pipelines.diagnose import diagnose_jointed
+        from pipelines.diagnose import diagnose
 
         try:
-            diagnosis, refit = timer.run("diagnose", diagnose_jointed, p.trials, holdout, fit, p.placement,
-                                         prior.inertial, jconfig, config.diagnosis)
+            diagnosis, refit = timer.run("diagnose", diagnose, subject, p.trials, holdout, config.diagnosis)
         except ValueError as exc:  # e.g. trial halves too short for one window each: the identified build stands
             log(f"diagnose skipped: {exc}")
             diagnosis_skipped = str(exc)
@@ -141,6 +141,7 @@ def jointed_asset(p: Prepared) -> Identified:
         asset=asset,
         provenance={
             "identify": {"method": "featherstone", "config": asdict(jconfig), **identified.provenance()},
+            "subject": subject.to_json(),
             **({"diagnose": diagnosis.provenance() | {"refit": kept.provenance()}} if kept is not identified else
                {"diagnose": diagnosis.provenance()} if diagnosis else
                {"diagnose": {"skipped": diagnosis_skipped}} if diagnosis_skipped else {}),

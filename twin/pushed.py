@@ -16,8 +16,8 @@ from twin.stages import Identified, Prepared, body_asset, kind_hint, log_diagnos
 def pushed_asset(p: Prepared) -> Identified:
     """Identify the pushed object on the support its pushes choose, diagnose what the model lacks (the refit
     with it kept), and combine a weighed mass where the pushes left the mass to the prior."""
-    from pipelines.diagnose import diagnose_pushed
-    from pipelines.identify import SUPPORTS, SlidingConfig, identify_pushed
+    from pipelines.diagnose import diagnose
+    from pipelines.identify import SUPPORTS, PushedBody, SlidingConfig, identify_pushed
 
     config, timer, log = p.config, p.timer, p.log
     body, mu_prior = sliding_body(p.mesh, p.prior)
@@ -26,14 +26,15 @@ def pushed_asset(p: Prepared) -> Identified:
                            SlidingConfig(moving_speed_m_s=config.push_min_speed_m_s), supports=SUPPORTS)
     # the support the pushes chose: the diagnosis, the replay and the export use it too
     sconfig = pushed.config
+    subject = PushedBody(body, mu_prior, sconfig)
     if pushed.support is not None:
         log(f"  {pushed.support.words}")
     diagnosis, refit = None, None
     if config.diagnose:
-        diagnosis, refit = timer.run("diagnose", diagnose_pushed, p.trials, [p.holdout] if p.holdout else [], body,
-                                     mu_prior, sconfig, config.diagnosis)
+        diagnosis, refit = timer.run("diagnose", diagnose, subject, p.trials, p.holdout, config.diagnosis)
         log_diagnosis(diagnosis, log)
     theta, fit, provenance, loss_history, traces = sliding_result(pushed, refit, diagnosis, body, p.prior)
+    provenance["subject"] = subject.to_json()
     theta = weighed_where_prior(theta, config.mass_kg)
     log(f"  friction {theta.friction.value:.3f} +- {theta.friction.std:.3f} "
         f"({provenance['identify']['friction_from']})")

@@ -16,6 +16,7 @@ _WHERE = {
     "ResidualAnalysis": "residuals", "analyse_residuals": "residuals", "describe": "residuals",
     "Screening": "screening", "screen": "screening",
     "Diagnosis": "select", "diagnose_held": "select", "replay_held": "select",
+    "diagnose": "entry",
 }
 
 __all__ = ["DiagnoseConfig", *_WHERE]

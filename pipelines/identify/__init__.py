@@ -6,6 +6,9 @@ One module per kind, and this face is what other stages use (the diagnosis refit
   Newton fit where it predicts the held-out recording better (`free_body`, `least_squares`, `posterior`);
 - pushed (sliding) objects: `identify_pushed` chooses the support and fits friction (`sliding`);
 - jointed parts: `identify_jointed` on the joint `detect_kind` finds (`jointed`, `kind`).
+
+Each kind's body as its model sees it is a subject (`HeldBody`, `PushedBody`, `JointedPart`): the diagnosis
+takes one (`pipelines.diagnose.diagnose`), and a build records it for a later `twin diagnose`.
 """
 
 from .free_body import Identification, IdentifyConfig, InertialBounds, identify_free_body
@@ -27,19 +30,19 @@ from .sliding import (
     EFFECT_SLOTS, SUPPORTS, PlanarBody, PushWindows, SlidingConfig, SlidingFit, SlidingRollout, concat_push_windows,
     estimate_force_bias, identify_pushed, identify_sliding, measured_friction, push_windows, turn_check,
 )
+from .subjects import HeldBody, JointedPart, PushedBody, Subject, subject_from_json
 from .windows import ShootingWindows, concat_windows, make_windows, predicts_better
 
 __all__ = [
-    "EFFECT_SIZE", "EFFECT_SLOTS", "JOINT_EFFECT_PARAMS", "STRIBECK_SPEEDS", "SUPPORTS",
-    "FreeBodyRollout", "HeldIdentification", "Identification", "IdentifyConfig", "InertialBounds", "JointFit",
-    "JointedConfig", "JointedIdentification", "KindDetection", "LeastSquaresResult", "NewtonEulerRows", "PlanarBody",
-    "PosteriorConfig", "PosteriorResult", "PushWindows", "ShootingWindows", "SlidingConfig", "SlidingFit",
-    "SlidingRollout",
-    "concat_push_windows", "concat_windows", "detect_kind", "equation_of_motion_rows", "estimate_force_bias",
-    "estimate_noise_levels", "identify_free_body", "identify_held", "identify_jointed", "identify_least_squares",
-    "identify_posterior", "identify_pushed", "identify_sliding", "joint_body", "joint_coordinates",
-    "joint_effect_columns", "joint_windows", "make_windows", "measured_friction", "nearest_physical_inertia",
-    "newton_euler_rows", "object_frame_from_pi", "predicts_better", "push_windows", "q_and_position_rmse",
-    "recording_noise_levels", "renoised", "replay_jointed", "theta_from_physical", "tracked_to_object",
-    "turn_check", "with_weighed_mass",
+    "EFFECT_SIZE", "EFFECT_SLOTS", "JOINT_EFFECT_PARAMS", "STRIBECK_SPEEDS", "SUPPORTS", "FreeBodyRollout",
+    "HeldBody", "HeldIdentification", "Identification", "IdentifyConfig", "InertialBounds", "JointFit",
+    "JointedConfig", "JointedIdentification", "JointedPart", "KindDetection", "LeastSquaresResult", "NewtonEulerRows",
+    "PlanarBody", "PosteriorConfig", "PosteriorResult", "PushWindows", "PushedBody", "ShootingWindows",
+    "SlidingConfig", "SlidingFit", "SlidingRollout", "Subject", "concat_push_windows", "concat_windows",
+    "detect_kind", "equation_of_motion_rows", "estimate_force_bias", "estimate_noise_levels", "identify_free_body",
+    "identify_held", "identify_jointed", "identify_least_squares", "identify_posterior", "identify_pushed",
+    "identify_sliding", "joint_body", "joint_coordinates", "joint_effect_columns", "joint_windows", "make_windows",
+    "measured_friction", "nearest_physical_inertia", "newton_euler_rows", "object_frame_from_pi", "predicts_better",
+    "push_windows", "q_and_position_rmse", "recording_noise_levels", "renoised", "replay_jointed",
+    "subject_from_json", "theta_from_physical", "tracked_to_object", "turn_check", "with_weighed_mass",
 ]
