@@ -93,7 +93,7 @@ def test_sensor_bias_in_the_sensor_frame_when_a_force_axis_is_never_read():
     np.testing.assert_allclose(params["force"], [-0.2, -0.1, 0.0], atol=1e-9)
 
 
-HEX = (Path(__file__).parents[2] / ".." / "shared" / "data" / "mit-push" / "mit_push_dataset" / "json"
+HEX = (Path(__file__).parents[3] / ".." / "shared" / "data" / "mit-push" / "mit_push_dataset" / "json"
        / "motion_surface=plywood_shape=hex_a=0_v=150_i=1.000_s=0.000_t=-0.349.json").resolve()
 
 

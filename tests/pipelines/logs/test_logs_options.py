@@ -15,7 +15,7 @@ from pipelines.logs import LogError, read_recording
 from pipelines.synth.recording import write_recording
 from twin.cli import main
 
-BAGS = (Path(__file__).parents[2] / ".." / "shared" / "data" / "mit-push" / "ros2_mcap").resolve()
+BAGS = (Path(__file__).parents[3] / ".." / "shared" / "data" / "mit-push" / "ros2_mcap").resolve()
 ST_1 = BAGS / "St_block" / "Test_st_1"
 AL_1 = BAGS / "Al_block" / "Test_metal_1"
 needs_bags = pytest.mark.skipif(not ST_1.exists(), reason="shared data (../shared/data/mit-push) not present")

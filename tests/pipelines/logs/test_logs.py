@@ -14,7 +14,7 @@ from pipelines.logs import LogError, inspect_recording, read_recording
 from pipelines.synth import recording as synth_recording
 from pipelines.synth.recording import write_recording
 
-DATA = (Path(__file__).parents[2] / ".." / "shared" / "data").resolve()
+DATA = (Path(__file__).parents[3] / ".." / "shared" / "data").resolve()
 ST_1 = DATA / "mit-push" / "ros2_mcap" / "St_block" / "Test_st_1" / "Test_st_1.mcap"
 
 

@@ -235,7 +235,7 @@ def test_build_goes_on_when_the_vlm_refuses(server, tmp_path):
     """`twin build --vlm` against a refusing model writes the asset from the offline prior."""
     from twin.build import BuildConfig, build
 
-    sample = Path(__file__).resolve().parents[2] / "samples" / "cube"
+    sample = Path(__file__).resolve().parents[3] / "samples" / "cube"
     url = f"http://127.0.0.1:{server.server_address[1]}/v1"
     lines = []
     out = build(BuildConfig(source=sample / "scan", logs=(sample / "trial.mcap",), output=tmp_path / "out",
