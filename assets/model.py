@@ -117,6 +117,26 @@ class Inertial:
         return None
 
 
+FLAT_INERTIAL: tuple[str, ...] = ("mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+"""The flat inertial vector: mass [kg], COM [m] and the inertia about the COM [kg m^2], object frame. Covariances
+and standard deviations of a body come in this order, and a prior's bounds C cover its first seven."""
+MASS, COM, MOMENTS, PRODUCTS = 0, slice(1, 4), slice(4, 7), slice(7, 10)
+"""Where each quantity sits in the flat vector; one moment by name: `FLAT_INERTIAL.index("Izz")`."""
+
+
+def flat_inertial(body: Inertial) -> np.ndarray:
+    """body as its flat vector (`FLAT_INERTIAL`)."""
+    I = body.inertia_matrix()
+    return np.array([body.mass, *body.com, I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
+
+
+def symmetric_from_flat(flat) -> np.ndarray:
+    """The 3x3 symmetric matrix whose diagonal and products sit at `MOMENTS` and `PRODUCTS` of a flat vector:
+    the inertia of a flat body, or its standard deviations laid out as the tensor."""
+    (xx, yy, zz), (xy, xz, yz) = np.asarray(flat, dtype=float)[MOMENTS], np.asarray(flat, dtype=float)[PRODUCTS]
+    return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+
+
 @dataclass(frozen=True)
 class Estimate:
     """An identified or prior quantity: value, standard deviation, where it came from.

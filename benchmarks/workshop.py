@@ -344,11 +344,6 @@ def mass_bound_pct(case: WorkshopCase, level: str, root: Path = WORKSHOP) -> flo
     return float(100 * np.sqrt(2 / np.pi) * sigma / case.truth.mass)
 
 
-def _flat(body) -> np.ndarray:
-    I = body.inertia_matrix()
-    return np.array([body.mass, *body.com, I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
-
-
 def bench_workshop(seeds: int = 10, levels: tuple[str, ...] = ("No", "Low", "Mod", "High"),
                    tools: tuple[str, ...] = WORKSHOP_TOOLS, method: str = "ls", parts: str = "segmentation",
                    root: Path = WORKSHOP) -> list[dict]:
@@ -366,6 +361,7 @@ def bench_workshop(seeds: int = 10, levels: tuple[str, ...] = ("No", "Low", "Mod
     changes only the time (3-15 s a run here). A run that raises is counted, not fatal. Coverage: the share of the ten flat parameters (mass, COM, inertia about the COM) whose reported
     95 % interval holds the truth.
     """
+    from assets import flat_inertial
     from pipelines.identify import IdentifyConfig, identify_held, with_weighed_mass
     from pipelines.identify.posterior import data_term_from_least_squares, identify_posterior
 
@@ -410,12 +406,12 @@ def bench_workshop(seeds: int = 10, levels: tuple[str, ...] = ("No", "Low", "Mod
                 except Exception as exc:  # noqa: BLE001 - the bench counts what raises
                     seconds, error, choice, dominated = time.perf_counter() - t0, f"{type(exc).__name__}: {exc}", "", []
                     print(f"  {tool} {level} seed {seed}: raised {error}", flush=True)
-                truth = _flat(case.truth)
+                truth = flat_inertial(case.truth)
                 for estimator, (body, cov) in found.items():
                     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
                     rows.append({"tool": tool, "level": level, "seed": seed, "estimator": estimator,
                                  **workshop_errors(body, case.truth, case.grasp, case.extents_mesh),
-                                 "covered": (np.abs(_flat(body) - truth) <= 1.96 * std).tolist(),
+                                 "covered": (np.abs(flat_inertial(body) - truth) <= 1.96 * std).tolist(),
                                  "seconds": seconds, "choice": choice if estimator == "kept" else "",
                                  "prior_dominated": dominated if estimator == "kept" else []})
                 if error is not None:

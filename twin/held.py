@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from assets import Estimate, Fit, Theta
+from assets import COM, FLAT_INERTIAL, MASS, MOMENTS, Estimate, Fit, Theta, symmetric_from_flat
 from pipelines.validate import replay_held_mujoco, validate_exports
 from twin.stages import Identified, Prepared, body_asset, kind_hint, log_diagnosis
 
@@ -76,15 +76,15 @@ def _held_theta(inertial, covariance, dominated: set, prior) -> Theta:
     """theta with its standard deviations and 95 % intervals; friction is the prior's (a held object never
     slides). A quantity whose every component the recordings left to the geometry prior is the prior's."""
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
-    inertia_std = np.array([[std[4], std[7], std[8]], [std[7], std[5], std[9]], [std[8], std[9], std[6]]])
+    inertia_std = symmetric_from_flat(std)
     ci = lambda v, s: (np.asarray(v) - 1.96 * np.asarray(s), np.asarray(v) + 1.96 * np.asarray(s))  # noqa: E731
     source = lambda names: "prior" if dominated >= set(names) else "measured"  # noqa: E731
     return Theta(
-        mass=Estimate(inertial.mass, std[0], source=source(["mass"]), interval95=ci(inertial.mass, std[0]),
-                      prior=prior.provenance()),
-        com=Estimate(inertial.com, tuple(std[1:4]), source=source(["com_x", "com_y", "com_z"]),
-                     interval95=ci(inertial.com, std[1:4])),
-        inertia=Estimate(inertial.inertia, inertia_std, source=source(["Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz"]),
+        mass=Estimate(inertial.mass, std[MASS], source=source(FLAT_INERTIAL[:1]),
+                      interval95=ci(inertial.mass, std[MASS]), prior=prior.provenance()),
+        com=Estimate(inertial.com, tuple(std[COM]), source=source(FLAT_INERTIAL[COM]),
+                     interval95=ci(inertial.com, std[COM])),
+        inertia=Estimate(inertial.inertia, inertia_std, source=source(FLAT_INERTIAL[MOMENTS.start:]),
                          interval95=ci(inertial.inertia, inertia_std)),
         friction=Estimate(
             prior.friction[0], (prior.friction[2] - prior.friction[1]) / 4, source="prior",

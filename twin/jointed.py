@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from assets import Asset, Estimate, Fit, FitMetrics, Joint, Theta
+from assets import COM, MASS, MOMENTS, Asset, Estimate, Fit, FitMetrics, Joint, Theta
 from pipelines.validate import replay_jointed_mujoco, validate_jointed_exports
 from twin.stages import Identified, Prepared, kind_hint, log_diagnosis, weighed_where_prior
 from twin.summary import bounds_flags, doubtful_flags, extent_flags
@@ -41,11 +41,11 @@ def jointed_theta(identified, prior, joint_type: str):
                         interval95=ci(identified.value("friction"), identified.std("friction")))
     # the tensor is the prior's, scaled by what was measured (mass, or the moment about the axis)
     scale = inertial.inertia_matrix()[0, 0] / prior.inertial.inertia_matrix()[0, 0]
-    inertia = _prior_estimate(inertial.inertia, np.diag(lo[4:7] * scale), np.diag(hi[4:7] * scale))
+    inertia = _prior_estimate(inertial.inertia, np.diag(lo[MOMENTS] * scale), np.diag(hi[MOMENTS] * scale))
     if joint_type == "prismatic":
         m, s = identified.value("mass"), identified.std("mass")
         return Theta(Estimate(m, s, interval95=ci(m, s), prior=prior.provenance()),
-                     _prior_estimate(inertial.com, lo[1:4], hi[1:4]), inertia, friction)
+                     _prior_estimate(inertial.com, lo[COM], hi[COM]), inertia, friction)
     determined = [("axis_inertia", Estimate(identified.value("axis_inertia"), identified.std("axis_inertia"),
                                             interval95=ci(identified.value("axis_inertia"),
                                                           identified.std("axis_inertia"))))]
@@ -55,8 +55,8 @@ def jointed_theta(identified, prior, joint_type: str):
         g = np.linalg.norm(md)
         s = float(np.sqrt(md @ identified.covariance[np.ix_(i, i)] @ md) / max(g, 1e-12))
         determined.append(("gravity_moment", Estimate(g, s, interval95=ci(g, s))))
-    mass = _prior_estimate(prior.inertial.mass, lo[0], hi[0], prior.provenance())
-    return Theta(mass, _prior_estimate(inertial.com, lo[1:4], hi[1:4]), inertia, friction, tuple(determined))
+    mass = _prior_estimate(prior.inertial.mass, lo[MASS], hi[MASS], prior.provenance())
+    return Theta(mass, _prior_estimate(inertial.com, lo[COM], hi[COM]), inertia, friction, tuple(determined))
 
 
 def jointed_asset(p: Prepared) -> Identified:

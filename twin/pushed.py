@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from assets import Estimate, Fit, FitMetrics, Theta
+from assets import FLAT_INERTIAL, MASS, Estimate, Fit, FitMetrics, Theta
 from pipelines.validate import replay_pushed_mujoco, validate_exports
 from twin.stages import Identified, Prepared, body_asset, kind_hint, log_diagnosis, weighed_where_prior
 
@@ -62,8 +62,9 @@ def sliding_body(mesh_object, prior):
     """
     from pipelines.identify import PlanarBody
 
-    mass_rel = float(np.log(prior.upper[0] / prior.lower[0]) / 4)
-    izz_rel = float(np.log(prior.upper[6] / prior.lower[6]) / 4)
+    izz = FLAT_INERTIAL.index("Izz")
+    mass_rel = float(np.log(prior.upper[MASS] / prior.lower[MASS]) / 4)
+    izz_rel = float(np.log(prior.upper[izz] / prior.lower[izz]) / 4)
     body = PlanarBody(tuple(0.5 * (mesh_object.bounds[1] - mesh_object.bounds[0])), float(prior.inertial.mass),
                       float(np.asarray(prior.inertial.inertia)[2, 2]), mass_rel_std=mass_rel, izz_rel_std=izz_rel)
     return body, float(prior.friction_kinetic[0])

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from assets import MASS, MOMENTS
+
 _ESTIMATES = {"newton": "the Newton fit", "least_squares": "least squares", "baseline": "the prior",
               "prior": "the prior", "posterior": "the posterior (the recordings with the geometry prior)"}
 
@@ -33,16 +35,17 @@ def bounds_flags(theta, lower, upper) -> tuple[dict, ...]:
     misdetected kind, a wrench bias): either way it must not pass as an ordinary measurement.
     """
     flags = []
-    if theta.mass.source == "measured" and not lower[0] <= theta.mass.value <= upper[0]:
+    if theta.mass.source == "measured" and not lower[MASS] <= theta.mass.value <= upper[MASS]:
         flags.append({"parameter": "mass", "problem": "outside the geometry prior's bounds",
-                      "value": float(theta.mass.value), "bounds": [float(lower[0]), float(upper[0])]})
-    if theta.inertia.source == "measured" and len(lower) >= 7:
+                      "value": float(theta.mass.value), "bounds": [float(lower[MASS]), float(upper[MASS])]})
+    if theta.inertia.source == "measured" and len(lower) >= MOMENTS.stop:
         moments = np.diag(np.asarray(theta.inertia.value, dtype=float))
-        outside = [i for i in range(3) if not lower[4 + i] <= moments[i] <= upper[4 + i]]
+        low, high = np.asarray(lower, dtype=float)[MOMENTS], np.asarray(upper, dtype=float)[MOMENTS]
+        outside = [i for i in range(3) if not low[i] <= moments[i] <= high[i]]
         if outside:
             flags.append({"parameter": "inertia", "problem": "diagonal moments outside the geometry prior's bounds",
                           "axes": ["xyz"[i] for i in outside], "value": moments.tolist(),
-                          "bounds": [list(map(float, lower[4:7])), list(map(float, upper[4:7]))]})
+                          "bounds": [low.tolist(), high.tolist()]})
     return tuple(flags)
 
 

@@ -18,7 +18,7 @@ from typing import Callable, Literal
 
 import numpy as np
 
-from assets import Inertial, Pose
+from assets import COM, MASS, MOMENTS, PRODUCTS, Inertial, Pose, symmetric_from_flat
 
 from .inertia import THETA_SIZE, flat_physical, physical_from_theta, physical_jacobian, theta_from_physical
 from .rollout import FreeBodyRollout
@@ -181,8 +181,8 @@ def prior_starts(prior: Inertial, bounds: InertialBounds, count: int, seed: int)
     out, tries = [prior][:count], 0
     while len(out) < count and tries < 100 * count:
         tries += 1
-        m = float(np.exp(rng.uniform(np.log(lo[0]), np.log(hi[0]))))
-        c = rng.uniform(lo[1:4], hi[1:4])
+        m = float(np.exp(rng.uniform(np.log(lo[MASS]), np.log(hi[MASS]))))
+        c = rng.uniform(lo[COM], hi[COM])
         d, R = prior.principal()
         I = R @ np.diag(d * (m / prior.mass) * np.exp(rng.uniform(-0.4, 0.4, 3))) @ R.T
         candidate = Inertial(m, c, I)
@@ -339,8 +339,8 @@ def paper_gradient_descent(rollout, theta, bounds: InertialBounds, config: Ident
     weight = np.full((S, 6), 1.0 / (S * W))
     flat = flat_physical(theta)
     scale = np.abs(flat)
-    scale[1:4] = np.cbrt(flat[0] / 1000.0)  # COM: the body's size at water density [m]
-    scale[7:] = np.mean(scale[4:7])
+    scale[COM] = np.cbrt(flat[MASS] / 1000.0)  # COM: the body's size at water density [m]
+    scale[PRODUCTS] = np.mean(scale[MOMENTS])
     best, best_loss, history = theta, np.inf, []
     for step in range(config.paper_iterations):
         loss, g_theta, _, _ = rollout.loss_and_grad(theta[None], None, None, weight, False)
@@ -356,13 +356,13 @@ def paper_gradient_descent(rollout, theta, bounds: InertialBounds, config: Ident
         # d loss / d flat through the parameterisation: theta is a smooth function of the physical values
         J = physical_jacobian(theta)  # d flat / d theta
         g_flat = np.linalg.lstsq(J.T, g_theta, rcond=None)[0]
-        g_flat[:7] += config.penalty_weight * 2 * v * dv
+        g_flat[:MOMENTS.stop] += config.penalty_weight * 2 * v * dv  # the bounds cover mass, COM, moments
         direction = np.sign(g_flat)
         for _ in range(20):
             trial = flat - 0.01 * scale * direction
-            I = np.array([[trial[4], trial[7], trial[8]], [trial[7], trial[5], trial[9]], [trial[8], trial[9], trial[6]]])
-            if trial[0] > 0 and Inertial(trial[0], trial[1:4], I).physical_violation() is None:
-                theta = theta_from_physical(trial[0], trial[1:4], I)
+            I = symmetric_from_flat(trial)
+            if trial[MASS] > 0 and Inertial(trial[MASS], trial[COM], I).physical_violation() is None:
+                theta = theta_from_physical(trial[MASS], trial[COM], I)
                 break
             direction = 0.5 * direction
     return best, history

@@ -18,7 +18,7 @@ from typing import Callable, Literal
 
 import numpy as np
 
-from assets import FitMetrics, Inertial, Pose
+from assets import COM, MASS, FitMetrics, Inertial, Pose, flat_inertial, symmetric_from_flat
 
 from .free_body import Identification, IdentifyConfig, InertialBounds, identify_free_body, prior_starts
 from .inertia import nearest_physical_inertia, theta_from_physical
@@ -55,7 +55,7 @@ class HeldIdentification:
     choice: str = ""
     """Which estimate was kept and why, in words."""
     prior_dominated: tuple[str, ...] = ()
-    """Flat parameters (posterior.FLAT_NAMES) the recordings could not determine: the kept value is mostly
+    """Flat parameters (`assets.FLAT_INERTIAL`) the recordings could not determine: the kept value is mostly
     the prior's."""
 
     def provenance(self) -> dict:
@@ -128,7 +128,7 @@ def identify_held(
     if ls_body is None:
         notes.append("least squares is not a physical body (not replayed)")
     posterior = identify_posterior([data_term_from_least_squares(f.pi, f.normal, f.meat) for f in fits_ls],
-                                   X_tracked_body, prior, (bounds.lower[0], bounds.upper[0]), parts,
+                                   X_tracked_body, prior, (bounds.lower[MASS], bounds.upper[MASS]), parts,
                                    posterior_config, extra_starts={"least_squares": ls_body})
     candidates = {"baseline": prior}
     if ls_body is not None:
@@ -203,14 +203,13 @@ def with_weighed_mass(body: Inertial, covariance: np.ndarray, mass_kg: float,
     through their covariance, so COM and inertia move as far as the recordings tie them to the mass.
     Where the update would leave the inertia unphysical, the nearest physical one is kept.
     """
-    inertia = np.asarray(body.inertia, dtype=float)
-    x = np.array([body.mass, *body.com, *np.diag(inertia), inertia[0, 1], inertia[0, 2], inertia[1, 2]])
+    x = flat_inertial(body)
     cov = np.asarray(covariance, dtype=float)
-    gain = cov[:, 0] / (cov[0, 0] + std_kg**2)
-    x = x + gain * (mass_kg - x[0])
-    cov = cov - np.outer(gain, cov[0, :])
-    moments = np.array([[x[4], x[7], x[8]], [x[7], x[5], x[9]], [x[8], x[9], x[6]]])
-    return Inertial(float(x[0]), tuple(x[1:4]), nearest_physical_inertia(float(x[0]), moments)), cov
+    gain = cov[:, MASS] / (cov[MASS, MASS] + std_kg**2)
+    x = x + gain * (mass_kg - x[MASS])
+    cov = cov - np.outer(gain, cov[MASS, :])
+    mass = float(x[MASS])
+    return Inertial(mass, tuple(x[COM]), nearest_physical_inertia(mass, symmetric_from_flat(x))), cov
 
 
 def windows_from_recordings(recordings, config: IdentifyConfig) -> ShootingWindows:
@@ -234,8 +233,8 @@ def newton_starts(least_squares: Inertial, prior: Inertial, bounds: InertialBoun
 
 def _clip_into_bounds(inertial: Inertial, prior: Inertial, bounds: InertialBounds) -> Inertial:
     """The least-squares estimate moved inside C and made physical, or the prior if it cannot be."""
-    m = float(np.clip(inertial.mass, bounds.lower[0], bounds.upper[0]))
-    c = np.clip(inertial.com, bounds.lower[1:4], bounds.upper[1:4])
+    m = float(np.clip(inertial.mass, bounds.lower[MASS], bounds.upper[MASS]))
+    c = np.clip(inertial.com, bounds.lower[COM], bounds.upper[COM])
     candidate = Inertial(m, c, np.asarray(inertial.inertia) * (m / inertial.mass))
     d, _ = candidate.principal()
     if candidate.physical_violation() is not None or d[0] < 1e-3 * d[2]:

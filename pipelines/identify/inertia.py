@@ -71,7 +71,7 @@ def physical_jacobian(theta: np.ndarray, eps: float = 1e-7) -> np.ndarray:
 
 
 def flat_physical(theta: np.ndarray) -> np.ndarray:
-    """(mass, cx, cy, cz, Ixx, Iyy, Izz, Ixy, Ixz, Iyz) from theta."""
+    """The flat vector (`assets.FLAT_INERTIAL`) from theta, which need not be physical."""
     m, c, I = physical_from_theta(theta)
     return np.array([m, *c, I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
 

@@ -33,13 +33,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from assets import Inertial, Pose
+from assets import FLAT_INERTIAL, Inertial, Pose
 
 from .inertia import THETA_SIZE, flat_physical, physical_jacobian, theta_from_physical
 
 Z95 = 1.959964
-FLAT_NAMES = ("mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
-"""Names of the flat parameters (mass [kg], COM [m] in the object frame, inertia about the COM [kg m^2])."""
 
 
 @dataclass(frozen=True)
@@ -82,7 +80,7 @@ class PosteriorResult:
     """The MAP body, its Laplace covariance over (mass, com xyz, Ixx Iyy Izz Ixy Ixz Iyz), what it came from.
 
     data_share [10]: per flat parameter, 1 - posterior variance / prior variance (1: the recordings alone,
-    0: the prior alone); prior_dominated: names (FLAT_NAMES) whose share is below the configured one;
+    0: the prior alone); prior_dominated: names (FLAT_INERTIAL) whose share is below the configured one;
     densities: each part's density [kg/m^3] (or the overall scale in kg per unit of the prior's mass when
     no parts were given); start: which start the MAP came from; moved: whether it moved from that start;
     message: the solver's words.
@@ -115,7 +113,7 @@ class PosteriorResult:
             "start": self.start, "moved": self.moved, "evaluations": self.evaluations, "cost": self.cost,
             "start_costs": self.start_costs, "message": self.message,
             "densities": list(self.densities),
-            "data_share": dict(zip(FLAT_NAMES, map(float, self.data_share))),
+            "data_share": dict(zip(FLAT_INERTIAL, map(float, self.data_share))),
             "prior_dominated": list(self.prior_dominated),
         }
 
@@ -292,7 +290,7 @@ def identify_posterior(
     m, c, I = _physical(theta)
     _, rho = part_model(best[THETA_SIZE:] if free_parts else np.zeros(1))
     rho = rho * m / float(rho @ volumes)  # the densities that give the body's mass [kg/m^3; kg per unit without parts]
-    dominated = tuple(n for n, s in zip(FLAT_NAMES, data_share) if s < config.prior_dominated_share)
+    dominated = tuple(n for n, s in zip(FLAT_INERTIAL, data_share) if s < config.prior_dominated_share)
     return PosteriorResult(
         inertial=Inertial(m, c, I), covariance=covariance, theta=theta, data_share=data_share,
         prior_dominated=dominated, densities=tuple(map(float, rho)), start=best_name,
