@@ -321,3 +321,21 @@ def test_corner_support_chosen_by_the_held_out_push_it_predicts_better(tmp_path)
     support = pushed.provenance()["support"]
     assert support["model"] == "corners" and support["why"].startswith("support 'corners'")
     assert pushed.provenance()["config"]["support"] == "corners"
+
+
+def test_friction_read_from_the_balance_where_the_fit_slides_in_fewer_windows_than_the_object_slid_steadily():
+    """A quasi-static push: the fit's simulation slides in one window at its stick-slip threshold while the
+    object slid steadily in five; the balance over the five is what is measured. Sliding in as many, the fit."""
+    from pipelines.identify import SlidingFit, measured_friction
+    from pipelines.identify.sliding.balance import WrenchBalance
+
+    def fit(sliding, determined=True):
+        return SlidingFit(np.array([0.354, 0.837, 1e-3]), np.array([0.001, 0.0, 0.0]), (determined, False, False),
+                          1e-4, 1e-3, 6, 10, sliding_windows=sliding)
+
+    balance = WrenchBalance(0.308, 0.014, np.full(5, 0.308), 0.24)
+    assert measured_friction(fit(1), balance) == (0.308, 0.014, "wrench balance")
+    assert measured_friction(fit(5), balance) == (0.354, 0.001, "sliding fit")
+    assert measured_friction(fit(0, determined=False), balance)[2] == "wrench balance"
+    assert measured_friction(fit(1), None) == (0.354, 0.001, "sliding fit")
+    assert measured_friction(fit(0, determined=False), None) is None
