@@ -67,16 +67,18 @@ def test_friction_of_a_fit_that_only_bounds_mu():
     balance as measured; without a steady window, the prior raised to the bound, marked prior."""
     from types import SimpleNamespace
 
+    from pipelines.identify import SlidingFit
+    from pipelines.identify.sliding.balance import WrenchBalance
     from twin.pushed import sliding_friction
 
-    bound = SimpleNamespace(theta=np.array([0.38, 0.84, 1e-3]), std=np.zeros(3), determined=(False, False, False))
+    bound = SlidingFit(np.array([0.38, 0.84, 1e-3]), np.zeros(3), (False, False, False), 1e-4, 1e-3, 6, 10)
     prior = SimpleNamespace(friction_kinetic=(0.32, 0.2, 0.45))
-    balance = SimpleNamespace(mu=0.31, std=0.01)
+    balance = WrenchBalance(0.31, 0.01, np.full(3, 0.31), 0.2)
     friction, source = sliding_friction(bound, balance, prior)
     assert source == "wrench balance" and friction.source == "measured"
     assert friction.value == 0.31 and friction.interval95 == pytest.approx((0.2904, 0.3296))
     friction, source = sliding_friction(bound, None, prior)
     assert friction.source == "prior" and friction.value == 0.38 and friction.interval95 == (0.38, 0.45)
-    measured = SimpleNamespace(theta=np.array([0.3, 0.84, 1e-3]), std=np.array([0.01, 0, 0]),
-                               determined=(True, False, False))
+    measured = SlidingFit(np.array([0.3, 0.84, 1e-3]), np.array([0.01, 0, 0]), (True, False, False), 1e-4, 1e-3, 6,
+                          10, sliding_windows=5)
     assert sliding_friction(measured, balance, prior)[1] == "sliding fit"
