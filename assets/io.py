@@ -29,10 +29,7 @@ def asset_to_json(asset: Asset) -> dict:
         "schema": SCHEMA,
         "name": asset.name,
         "kind": asset.kind,
-        "placement": {
-            "position": list(asset.placement.position),
-            "quaternion_xyzw": list(asset.placement.quaternion_xyzw),
-        },
+        "placement": asset.placement.to_json(),
         "theta": {
             "mass": theta.mass.to_json(),
             "com": theta.com.to_json(),

@@ -76,6 +76,13 @@ class Pose:
     def __matmul__(self, other: "Pose") -> "Pose":
         return Pose.from_matrix(self.matrix() @ other.matrix())
 
+    def to_json(self) -> dict:
+        return {"position": list(self.position), "quaternion_xyzw": list(self.quaternion_xyzw)}
+
+    @staticmethod
+    def from_json(d: dict) -> "Pose":
+        return Pose(tuple(d["position"]), tuple(d["quaternion_xyzw"]))
+
 
 @dataclass(frozen=True)
 class Inertial:
@@ -99,6 +106,13 @@ class Inertial:
 
     def inertia_matrix(self) -> np.ndarray:
         return np.array(self.inertia)
+
+    def to_json(self) -> dict:
+        return {"mass_kg": self.mass, "com_m": list(self.com), "inertia_kg_m2": [list(r) for r in self.inertia]}
+
+    @staticmethod
+    def from_json(d: dict) -> "Inertial":
+        return Inertial(d["mass_kg"], tuple(d["com_m"]), d["inertia_kg_m2"])
 
     def principal(self) -> tuple[np.ndarray, np.ndarray]:
         """Principal moments (ascending) and a proper rotation R (det +1), I = R diag(d) R^T."""
@@ -133,7 +147,8 @@ def flat_inertial(body: Inertial) -> np.ndarray:
 def symmetric_from_flat(flat) -> np.ndarray:
     """The 3x3 symmetric matrix whose diagonal and products sit at `MOMENTS` and `PRODUCTS` of a flat vector:
     the inertia of a flat body, or its standard deviations laid out as the tensor."""
-    (xx, yy, zz), (xy, xz, yz) = np.asarray(flat, dtype=float)[MOMENTS], np.asarray(flat, dtype=float)[PRODUCTS]
+    flat = np.asarray(flat, dtype=float)
+    (xx, yy, zz), (xy, xz, yz) = flat[MOMENTS], flat[PRODUCTS]
     return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
 
 

@@ -71,17 +71,15 @@ class JointFit:
             "origin": self.origin.tolist(), "origin_std_m": self.origin_std_m.tolist(),
             "observed_travel": [float(self.q.min()), float(self.q.max())],
             "rms_position_m": self.rms_position_m, "rms_rotation_rad": self.rms_rotation_rad,
-            "tracked_at_zero": {"position": list(self.tracked_at_zero.position),
-                                "quaternion_xyzw": list(self.tracked_at_zero.quaternion_xyzw)},
+            "tracked_at_zero": self.tracked_at_zero.to_json(),
         }
 
     @staticmethod
     def from_json(d: dict) -> "JointFit":
         """The joint `to_json` wrote; its samples are not recorded, so t_s is empty and q the observed travel."""
-        tracked = d["tracked_at_zero"]
         return JointFit(d["type"], np.asarray(d["axis"], float), float(d["axis_std_rad"]),
                         np.asarray(d["origin"], float), np.asarray(d["origin_std_m"], float),
-                        Pose(tuple(tracked["position"]), tuple(tracked["quaternion_xyzw"])), np.zeros(0),
+                        Pose.from_json(d["tracked_at_zero"]), np.zeros(0),
                         np.asarray(d["observed_travel"], float), float(d["rms_position_m"]),
                         float(d["rms_rotation_rad"]))
 

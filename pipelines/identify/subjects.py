@@ -9,30 +9,11 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-import numpy as np
-
 from assets import Inertial, Pose
 
 from .jointed import JointedConfig
 from .kind import JointFit
 from .sliding import PlanarBody, SlidingConfig
-
-
-def _pose_json(pose: Pose) -> dict:
-    return {"position": list(pose.position), "quaternion_xyzw": list(pose.quaternion_xyzw)}
-
-
-def _pose(d: dict) -> Pose:
-    return Pose(tuple(d["position"]), tuple(d["quaternion_xyzw"]))
-
-
-def _inertial_json(inertial: Inertial) -> dict:
-    return {"mass_kg": inertial.mass, "com_m": list(inertial.com),
-            "inertia_kg_m2": np.asarray(inertial.inertia).tolist()}
-
-
-def _inertial(d: dict) -> Inertial:
-    return Inertial(d["mass_kg"], tuple(d["com_m"]), np.asarray(d["inertia_kg_m2"]))
 
 
 def _tuples(d: dict) -> dict:
@@ -49,12 +30,13 @@ class HeldBody:
     window_s: float
 
     def to_json(self) -> dict:
-        return {"kind": "free", "tracked_frame_in_object": _pose_json(self.X_tracked_body.inverse()),
-                "uniform": _inertial_json(self.uniform), "window_s": self.window_s}
+        return {"kind": "free", "tracked_frame_in_object": self.X_tracked_body.inverse().to_json(),
+                "uniform": self.uniform.to_json(), "window_s": self.window_s}
 
     @staticmethod
     def from_json(d: dict) -> HeldBody:
-        return HeldBody(_pose(d["tracked_frame_in_object"]).inverse(), _inertial(d["uniform"]), float(d["window_s"]))
+        return HeldBody(Pose.from_json(d["tracked_frame_in_object"]).inverse(), Inertial.from_json(d["uniform"]),
+                        float(d["window_s"]))
 
 
 @dataclass(frozen=True)
@@ -85,13 +67,13 @@ class JointedPart:
     config: JointedConfig
 
     def to_json(self) -> dict:
-        return {"kind": self.joint.type, "joint": self.joint.to_json(), "placement": _pose_json(self.placement),
-                "prior": _inertial_json(self.prior), "config": asdict(self.config)}
+        return {"kind": self.joint.type, "joint": self.joint.to_json(), "placement": self.placement.to_json(),
+                "prior": self.prior.to_json(), "config": asdict(self.config)}
 
     @staticmethod
     def from_json(d: dict) -> JointedPart:
-        return JointedPart(JointFit.from_json(d["joint"]), _pose(d["placement"]), _inertial(d["prior"]),
-                           JointedConfig(**d["config"]))
+        return JointedPart(JointFit.from_json(d["joint"]), Pose.from_json(d["placement"]),
+                           Inertial.from_json(d["prior"]), JointedConfig(**d["config"]))
 
 
 Subject = HeldBody | PushedBody | JointedPart

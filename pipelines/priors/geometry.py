@@ -52,14 +52,11 @@ class Prior:
             "density_kg_m3": [self.material.density_low, self.material.density, self.material.density_high],
             "source": self.material.source,
             "volume_m3": self.volume_m3,
-            "mass_kg": self.inertial.mass,
             "lower": list(self.lower),
             "upper": list(self.upper),
             "structure": self.structure,
-            "com_m": list(self.inertial.com),
-            "inertia_kg_m2": [list(r) for r in self.inertial.inertia],
-            "uniform": {"mass_kg": self.uniform.mass, "com_m": list(self.uniform.com),
-                        "inertia_kg_m2": [list(r) for r in self.uniform.inertia]},
+            **self.inertial.to_json(),
+            "uniform": self.uniform.to_json(),
         }
         if self.friction is not None:
             out["friction_static"] = list(self.friction)

@@ -116,7 +116,7 @@ def make_held_sample(mesh, out_dir: Path, config: HeldSampleConfig = HeldSampleC
         "principal_moments": np.linalg.eigvalsh(inertia_world).tolist(),
         "volume_m3": float(mesh_world.volume),
         "density_kg_m3": density,
-        "grasp_in_object": {"position": list(grasp.position), "quaternion_xyzw": list(grasp.quaternion_xyzw)},
+        "grasp_in_object": grasp.to_json(),
         "recordings": recordings,
         "effect": {"name": config.effect.name, "params": config.effect.params} if config.effect else None,
         **_engine_doc(engine, wrench_frame, mujoco),
