@@ -184,19 +184,19 @@ def _small_mask(root):
     return root / "masks/1.png", "w x h"
 
 
-def _missing_depth(root):
-    (root / "depth/1.png").unlink()
-    return root / "depth/1.png", "not found"
+def _removed(label, name, words, shown=None):
+    """A damage that deletes `name`; the error must name `shown` (default the deleted file) and say `words`."""
+    def damage(root):
+        (root / name).unlink()
+        return root / (shown or name), words
+
+    damage.__name__ = label
+    return damage
 
 
-def _missing_color(root):
-    (root / "images/1.png").unlink()
-    return root / "images/1.png", "not found"
-
-
-def _missing_mask(root):
-    (root / "masks/1.png").unlink()
-    return root / "masks/1.png", "not found"
+_missing_depth = _removed("missing_depth", "depth/1.png", "not found")
+_missing_color = _removed("missing_color", "images/1.png", "not found")
+_missing_mask = _removed("missing_mask", "masks/1.png", "not found")
 
 
 def _empty_depth(root):
@@ -354,16 +354,6 @@ def _text_pose(root):
     return root / "frame-000001.pose.txt", "numeric"
 
 
-def _one_pose_missing(root):
-    (root / "frame-000001.pose.txt").unlink()
-    return root / "frame-000001.depth.png", "no pose"
-
-
-def _no_intrinsics(root):
-    (root / "camera-intrinsics.txt").unlink()
-    return root / "camera-intrinsics.txt", "missing camera-intrinsics.txt"
-
-
 def _skewed_k(root):
     (root / "camera-intrinsics.txt").write_text("10 0.5 4\n0 11 3\n0 0 1\n")
     return root / "camera-intrinsics.txt", "no skew"
@@ -384,11 +374,6 @@ def _k_2x3(root):
     return root / "camera-intrinsics.txt", "must be 3x3"
 
 
-def _7scenes_color_missing(root):
-    (root / "frame-000001.color.jpg").unlink()
-    return root / "frame-000001.color.jpg", "not found"
-
-
 def _7scenes_color_size(root):
     Image.fromarray(np.zeros((H + 2, W, 3), np.uint8)).save(root / "frame-000001.color.jpg")
     return root / "frame-000001.color.jpg", "w x h"
@@ -407,6 +392,11 @@ def _7scenes_depth_8bit(root):
 def _7scenes_depth_all_invalid(root):
     Image.fromarray(np.full((H, W), 65535, np.uint16)).save(root / "frame-000001.depth.png")
     return root / "frame-000001.depth.png", "no valid"
+
+
+_one_pose_missing = _removed("one_pose_missing", "frame-000001.pose.txt", "no pose", shown="frame-000001.depth.png")
+_no_intrinsics = _removed("no_intrinsics", "camera-intrinsics.txt", "missing camera-intrinsics.txt")
+_7scenes_color_missing = _removed("7scenes_color_missing", "frame-000001.color.jpg", "not found")
 
 
 _7SCENES_ERRORS = [
