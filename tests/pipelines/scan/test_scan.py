@@ -141,11 +141,7 @@ def test_malformed_transforms_raise_scan_error_naming_it(tmp_path, case, edit, w
     """Each malformed transforms.json raises ScanError that starts with its path and says what is wrong."""
     root = _write_scan(tmp_path / "s")
     _edit(root, edit)
-    with pytest.raises(ScanError) as info:
-        read_scan(root)
-    message = str(info.value)
-    assert message.startswith(str((root / "transforms.json").resolve())), message
-    assert words in message
+    _assert_refused(root, root / "transforms.json", words)
 
 
 def test_missing_transforms_json_raises(tmp_path):
@@ -164,24 +160,14 @@ def test_invalid_json_raises(tmp_path):
         read_scan(root)
 
 
-def _eight_bit_depth(root):
-    Image.fromarray(np.full((H, W), 50, np.uint8)).save(root / "depth/1.png")
-    return root / "depth/1.png", "16-bit"
+def _saved(label, name, image, words):
+    """A damage that saves `image` (an array) as `name`; the error must name it and say `words`."""
+    def damage(root):
+        Image.fromarray(image).save(root / name)
+        return root / name, words
 
-
-def _small_depth(root):
-    Image.fromarray(np.full((H - 1, W), 500, np.uint16)).save(root / "depth/1.png")
-    return root / "depth/1.png", "w x h"
-
-
-def _small_color(root):
-    Image.fromarray(np.zeros((H, W + 2, 3), np.uint8)).save(root / "images/1.png")
-    return root / "images/1.png", "w x h"
-
-
-def _small_mask(root):
-    Image.fromarray(np.zeros((2, 2), np.uint8)).save(root / "masks/1.png")
-    return root / "masks/1.png", "w x h"
+    damage.__name__ = label
+    return damage
 
 
 def _removed(label, name, words, shown=None):
@@ -194,30 +180,20 @@ def _removed(label, name, words, shown=None):
     return damage
 
 
-_missing_depth = _removed("missing_depth", "depth/1.png", "not found")
-_missing_color = _removed("missing_color", "images/1.png", "not found")
-_missing_mask = _removed("missing_mask", "masks/1.png", "not found")
-
-
-def _empty_depth(root):
-    Image.fromarray(np.zeros((H, W), np.uint16)).save(root / "depth/1.png")
-    return root / "depth/1.png", "no valid"
-
-
 def _corrupt_depth(root):
     (root / "depth/1.png").write_bytes(b"not a png")
     return root / "depth/1.png", "cannot read"
 
 
 _FILE_ERRORS = [
-    _eight_bit_depth,
-    _small_depth,
-    _small_color,
-    _small_mask,
-    _missing_depth,
-    _missing_color,
-    _missing_mask,
-    _empty_depth,
+    _saved("eight_bit_depth", "depth/1.png", np.full((H, W), 50, np.uint8), "16-bit"),
+    _saved("small_depth", "depth/1.png", np.full((H - 1, W), 500, np.uint16), "w x h"),
+    _saved("small_color", "images/1.png", np.zeros((H, W + 2, 3), np.uint8), "w x h"),
+    _saved("small_mask", "masks/1.png", np.zeros((2, 2), np.uint8), "w x h"),
+    _removed("missing_depth", "depth/1.png", "not found"),
+    _removed("missing_color", "images/1.png", "not found"),
+    _removed("missing_mask", "masks/1.png", "not found"),
+    _saved("empty_depth", "depth/1.png", np.zeros((H, W), np.uint16), "no valid"),
     _corrupt_depth,
 ]
 
@@ -229,12 +205,16 @@ def test_bad_image_files_raise_scan_error_naming_them(tmp_path, damage):
 
 
 def _assert_damage_named(root, damage):
-    path, words = damage(root)
+    _assert_refused(root, *damage(root))
+
+
+def _assert_refused(root, path, words):
+    """read_scan refuses the scan with one line that starts with `path` and says `words`."""
     with pytest.raises(ScanError) as info:
         read_scan(root)
     message = str(info.value)
     assert message.startswith(str(path.resolve())), message
-    assert words in message
+    assert words in message and "\n" not in message and len(message) < 500, message
 
 
 def test_bad_object_json_raises(tmp_path):
@@ -317,105 +297,40 @@ def test_7scenes_depth_unit_can_be_given(tmp_path):
     assert read_scan(root, depth_unit_m=1e-4).frames[0].depth_m[1, 1] == pytest.approx(0.5)
 
 
-def _write_text(name, text):
+def _written(label, name, text, words):
+    """A damage that writes `text` into `name`; the error must name it and say `words`."""
     def damage(root):
         (root / name).write_text(text)
-        return root / name, None
+        return root / name, words
 
+    damage.__name__ = label
     return damage
 
 
-def _nan_pose(root):
+def _eye_with(row, col, value):
     T = np.eye(4)
-    T[0, 3] = np.nan
-    (root / "frame-000001.pose.txt").write_text(_pose_text(T))
-    return root / "frame-000001.pose.txt", "non-finite"
+    T[row, col] = value
+    return T
 
 
-def _scaled_7scenes_pose(root):
-    (root / "frame-000001.pose.txt").write_text(_pose_text(np.diag([1.1, 1.1, 1.1, 1.0])))
-    return root / "frame-000001.pose.txt", "not rigid"
-
-
-def _bad_last_row(root):
-    T = np.eye(4)
-    T[3, 0] = 0.5
-    (root / "frame-000001.pose.txt").write_text(_pose_text(T))
-    return root / "frame-000001.pose.txt", "last row"
-
-
-def _short_pose(root):
-    (root / "frame-000001.pose.txt").write_text(_pose_text(np.eye(4)[:3]))
-    return root / "frame-000001.pose.txt", "must be 4x4"
-
-
-def _text_pose(root):
-    (root / "frame-000001.pose.txt").write_text("identity\n")
-    return root / "frame-000001.pose.txt", "numeric"
-
-
-def _skewed_k(root):
-    (root / "camera-intrinsics.txt").write_text("10 0.5 4\n0 11 3\n0 0 1\n")
-    return root / "camera-intrinsics.txt", "no skew"
-
-
-def _negative_focal(root):
-    (root / "camera-intrinsics.txt").write_text("-10 0 4\n0 11 3\n0 0 1\n")
-    return root / "camera-intrinsics.txt", "focal"
-
-
-def _k_outside(root):
-    (root / "camera-intrinsics.txt").write_text("10 0 40\n0 11 3\n0 0 1\n")
-    return root / "camera-intrinsics.txt", "principal point"
-
-
-def _k_2x3(root):
-    (root / "camera-intrinsics.txt").write_text("10 0 4\n0 11 3\n")
-    return root / "camera-intrinsics.txt", "must be 3x3"
-
-
-def _7scenes_color_size(root):
-    Image.fromarray(np.zeros((H + 2, W, 3), np.uint8)).save(root / "frame-000001.color.jpg")
-    return root / "frame-000001.color.jpg", "w x h"
-
-
-def _7scenes_depth_size(root):
-    Image.fromarray(np.full((H, W + 1), 500, np.uint16)).save(root / "frame-000001.depth.png")
-    return root / "frame-000001.depth.png", "w x h"
-
-
-def _7scenes_depth_8bit(root):
-    Image.fromarray(np.full((H, W), 50, np.uint8)).save(root / "frame-000001.depth.png")
-    return root / "frame-000001.depth.png", "16-bit"
-
-
-def _7scenes_depth_all_invalid(root):
-    Image.fromarray(np.full((H, W), 65535, np.uint16)).save(root / "frame-000001.depth.png")
-    return root / "frame-000001.depth.png", "no valid"
-
-
-_one_pose_missing = _removed("one_pose_missing", "frame-000001.pose.txt", "no pose", shown="frame-000001.depth.png")
-_no_intrinsics = _removed("no_intrinsics", "camera-intrinsics.txt", "missing camera-intrinsics.txt")
-_7scenes_color_missing = _removed("7scenes_color_missing", "frame-000001.color.jpg", "not found")
-
-
+POSE, K = "frame-000001.pose.txt", "camera-intrinsics.txt"
 _7SCENES_ERRORS = [
-    _nan_pose,
-    _scaled_7scenes_pose,
-    _bad_last_row,
-    _short_pose,
-    _text_pose,
-    _one_pose_missing,
-    _no_intrinsics,
-    _skewed_k,
-    _negative_focal,
-    _k_outside,
-    _k_2x3,
-    _7scenes_color_missing,
-    _7scenes_color_size,
-    _7scenes_depth_size,
-    _7scenes_depth_8bit,
-    _7scenes_depth_all_invalid,
+    _written("nan_pose", POSE, _pose_text(_eye_with(0, 3, np.nan)), "non-finite"),
+    _written("scaled_7scenes_pose", POSE, _pose_text(np.diag([1.1, 1.1, 1.1, 1.0])), "not rigid"),
+    _written("bad_last_row", POSE, _pose_text(_eye_with(3, 0, 0.5)), "last row"),
+    _written("short_pose", POSE, _pose_text(np.eye(4)[:3]), "must be 4x4"),
+    _written("text_pose", POSE, "identity\n", "numeric"),
+    _removed("one_pose_missing", POSE, "no pose", shown="frame-000001.depth.png"),
+    _removed("no_intrinsics", K, "missing camera-intrinsics.txt"),
+    _written("skewed_k", K, "10 0.5 4\n0 11 3\n0 0 1\n", "no skew"),
+    _written("negative_focal", K, "-10 0 4\n0 11 3\n0 0 1\n", "focal"),
+    _written("k_outside", K, "10 0 40\n0 11 3\n0 0 1\n", "principal point"),
+    _written("k_2x3", K, "10 0 4\n0 11 3\n", "must be 3x3"),
+    _removed("7scenes_color_missing", "frame-000001.color.jpg", "not found"),
+    _saved("7scenes_color_size", "frame-000001.color.jpg", np.zeros((H + 2, W, 3), np.uint8), "w x h"),
+    _saved("7scenes_depth_size", "frame-000001.depth.png", np.full((H, W + 1), 500, np.uint16), "w x h"),
+    _saved("7scenes_depth_8bit", "frame-000001.depth.png", np.full((H, W), 50, np.uint8), "16-bit"),
+    _saved("7scenes_depth_all_invalid", "frame-000001.depth.png", np.full((H, W), 65535, np.uint16), "no valid"),
 ]
 
 
@@ -491,11 +406,7 @@ def test_huge_numbers_and_deep_nesting_raise_scan_error(tmp_path, edit, words):
     """Integers beyond a float, beyond Python's digit limit, or nesting beyond its recursion limit: ScanError."""
     root = _write_scan(tmp_path / "s")
     _write_raw(root, edit)
-    with pytest.raises(ScanError) as info:
-        read_scan(root)
-    message = str(info.value)
-    assert message.startswith(str((root / "transforms.json").resolve())), message
-    assert words in message and "\n" not in message and len(message) < 500
+    _assert_refused(root, root / "transforms.json", words)
 
 
 def test_deeply_nested_object_json_raises(tmp_path):
@@ -522,11 +433,7 @@ def test_implausible_values_raise_scan_error(tmp_path, edit, words):
     """Values no camera or scan has are refused before they reach the maths (or an allocation)."""
     root = _write_scan(tmp_path / "s")
     _edit(root, edit)
-    with pytest.raises(ScanError) as info:
-        read_scan(root)
-    message = str(info.value)
-    assert message.startswith(str((root / "transforms.json").resolve())), message
-    assert words in message and "\n" not in message and len(message) < 500
+    _assert_refused(root, root / "transforms.json", words)
 
 
 def _png_claiming(path: Path, width: int, height: int) -> None:
