@@ -44,7 +44,7 @@ def held_asset(p: Prepared) -> Identified:
             # the identification lacked the effect, so its estimate is biased: the refit with it is kept
             inertial, fit_final = refit, diagnosis.fits["after"]
             fit_baseline = diagnosis.fits["before"]
-            dominated = set()
+            dominated = set(diagnosis.prior_dominated)
 
     if config.mass_kg is not None:
         inertial, covariance = with_weighed_mass(inertial, covariance, *config.mass_kg)

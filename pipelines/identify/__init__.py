@@ -24,7 +24,7 @@ from .least_squares import (
     LeastSquaresResult, NewtonEulerRows, identify_least_squares, newton_euler_rows, object_frame_from_pi,
 )
 from .noise import estimate_noise_levels, recording_noise_levels, renoised
-from .posterior import PosteriorConfig, PosteriorResult, identify_posterior
+from .posterior import DataTerm, PosteriorConfig, PosteriorResult, identify_posterior
 from .rollout import FreeBodyRollout
 from .sliding import (
     EFFECT_SLOTS, SUPPORTS, PlanarBody, PushWindows, SlidingConfig, SlidingFit, SlidingRollout, concat_push_windows,
@@ -34,7 +34,7 @@ from .subjects import HeldBody, JointedPart, PushedBody, Subject, subject_from_j
 from .windows import ShootingWindows, concat_windows, make_windows, predicts_better
 
 __all__ = [
-    "EFFECT_SIZE", "EFFECT_SLOTS", "JOINT_EFFECT_PARAMS", "STRIBECK_SPEEDS", "SUPPORTS", "FreeBodyRollout",
+    "DataTerm", "EFFECT_SIZE", "EFFECT_SLOTS", "JOINT_EFFECT_PARAMS", "STRIBECK_SPEEDS", "SUPPORTS", "FreeBodyRollout",
     "HeldBody", "HeldIdentification", "Identification", "IdentifyConfig", "InertialBounds", "JointFit",
     "JointedConfig", "JointedIdentification", "JointedPart", "KindDetection", "LeastSquaresResult", "NewtonEulerRows",
     "PlanarBody", "PosteriorConfig", "PosteriorResult", "PushWindows", "PushedBody", "ShootingWindows",
