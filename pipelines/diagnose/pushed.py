@@ -21,11 +21,11 @@ replayed on the evaluation windows from measured starts, the held-out
 recordings' (or, without them, each half of every trial fitted on the other
 half). A candidate is chosen when it predicts those windows significantly
 better than the base model (`predicts_better`, per-window log error), the pair
-of the two best when it beats the better alone; each chosen effect must also
-predict better with the other support model (`SUPPORTS`), or it stands in for
-how the face bears its load and is not reported. Inclusion probabilities are
-the share of bootstrap resamples of the evaluation windows in which a candidate
-predicts better.
+of the two best when it beats the better alone. The choice must also predict
+better than the other support model's (`SUPPORTS`) own best explanation, or it
+stands in for how the face bears its load and is not reported. Inclusion
+probabilities are the share of bootstrap resamples of the evaluation windows in
+which a candidate predicts better.
 """
 
 from __future__ import annotations
@@ -146,19 +146,29 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
 
     base = evaluate(())
     tried = PUSHED_CANDIDATES if testable else ()
-    passing = sorted((c for c in tried if predicts_better(evaluate((c,)), base)), key=lambda c: evaluate((c,)).sum())
-    best: tuple = (passing[0],) if passing else ()
-    if len(passing) >= 2:
-        pair = tuple(c for c in PUSHED_CANDIDATES if c in passing[:2])
-        if predicts_better(evaluate(pair), evaluate(best)):
-            best = pair
+
+    def choose(support: str) -> tuple[list, tuple]:
+        """The candidates that predict better under `support`, best first, and the set chosen."""
+        none = evaluate((), support)
+        passing = sorted((c for c in tried if predicts_better(evaluate((c,), support), none)),
+                         key=lambda c: evaluate((c,), support).sum())
+        best: tuple = (passing[0],) if passing else ()
+        if len(passing) >= 2:
+            pair = tuple(c for c in PUSHED_CANDIDATES if c in passing[:2])
+            if predicts_better(evaluate(pair, support), evaluate(best, support)):
+                best = pair
+        return passing, best
+
+    passing, best = choose(sconfig.support)
     # where the support face bears its load is the contact's least certain part (another simulator's contacts,
-    # a table's flatness), and a delay or a damping can stand in for it (a clean MuJoCo push chose a 2.5 ms
-    # delay with its corners loaded, damping with its face loaded uniformly): an effect is kept only when it
-    # also predicts better with the other support model
+    # a table's flatness), and a delay or a damping can stand in for it: a clean MuJoCo push chose a 2.5 ms
+    # delay with its corners loaded and damping with its face loaded uniformly, each as good as the other.
+    # The effects are kept only when they predict better than the other support model's own best explanation
     other = next(s for s in SUPPORTS if s != sconfig.support)
-    stand_ins = tuple(c for c in best if not predicts_better(evaluate((c,), other), evaluate((), other)))
-    best = tuple(c for c in best if c not in stand_ins)
+    rival = choose(other)[1] if best else ()
+    stand_ins = ()
+    if best and set(rival) != set(best) and not predicts_better(evaluate(best), evaluate(rival, other)):
+        stand_ins, best = best, ()
     scores = {"+".join(k) or "none": float(evaluate(k).mean()) for k in refits}
 
     # inclusion: the share of bootstrap resamples of the evaluation windows a candidate predicts better in
@@ -215,8 +225,8 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
         findings=(*(() if testable else ("a single push window and no held-out recording: no candidate effect can "
                                          "be tested (give --holdout); the window's own replay is analysed",)),
                   *((f"{' and '.join(stand_ins)} predicted the held-out windows better with the support loaded "
-                     f"as {sconfig.support!r} but not as {other!r}: a stand-in for the contact model, not "
-                     "reported",) if stand_ins else ()),
+                     f"as {sconfig.support!r}, but no better than {' and '.join(rival) or 'no effect'} with it "
+                     f"loaded as {other!r}: a stand-in for the contact model, not reported",) if stand_ins else ()),
                   *describe(residuals["before"])),
         heldout=bool(holdouts), traces=traces,
     )
