@@ -291,10 +291,11 @@ def _newton_refit(trials, X_tracked_body: Pose, inertial: Inertial, effect: np.n
 
 
 def _refit_with_effects(lib: Library, names, model: _Model, X_tracked_body: Pose, prior: Inertial):
-    """The body refitted with the effects `names` as a build identifies one (`identify_posterior`): least
-    squares' pi with the information left about it once the effects' coefficients are profiled out, and the
-    uniform-density prior where that is weak. Least squares alone put a 5 cm cube's inertia 160 % off, with a
-    negative moment, once a drag took its share of the torque. Returns the PosteriorResult."""
+    """The body refitted with the effects as a build identifies one (`identify_posterior`): least squares' pi
+    (at the model's delay) with the information left about it once the coefficients of `names` (the additive
+    effects) are profiled out, and the uniform-density prior where that is weak. Least squares alone put a
+    5 cm cube's inertia 160 % off, with a negative moment, once a drag took its share of the torque. Returns
+    the PosteriorResult."""
     information = np.linalg.pinv(_covariance(lib, names)[:10, :10])
     data = DataTerm(model.pi, 0.5 * (information + information.T))
     # mass bounds as wide as the jointed guard's: least squares' mass is well determined (within 3 % on every
@@ -352,9 +353,9 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
     if density:
         before_inertial = replace(before_inertial, com=tuple(prior.com))
     after_inertial, prior_dominated = _physical(found_inertial), ()
-    additive = tuple(n for n in best if n != "time_delay")
-    if additive:  # the effects share the wrench with the body: where they leave it weakly determined, the prior
-        posterior = _refit_with_effects(fitted_lib, additive, model, X_tracked_body, prior)
+    if best:  # the body a build keeps: where the effects leave it weakly determined, the prior
+        posterior = _refit_with_effects(fitted_lib, tuple(n for n in best if n != "time_delay"), model,
+                                        X_tracked_body, prior)
         after_inertial, prior_dominated = posterior.inertial, posterior.prior_dominated
     evaluation = holdout if holdout is not None else trials[0]
     # a bias constant in world axes (a world-frame message) is no term of the rollout's effect vector (tracked
