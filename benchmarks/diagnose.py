@@ -198,13 +198,12 @@ def _summary(rows: list[dict]) -> None:
     print(f"top-1 right: {len(right)}/{len(concealed)} concealed ({100 * len(right) / max(len(concealed), 1):.0f} %)")
     # a concealed effect that even the model that made the recording does not replay better than the base fit
     # (another simulator's joint friction, an effect at the noise) is beyond what the held-out recording tells
-    tellable = [r for r in concealed if r["rmse_true_m"] is not None and r["rmse_true_m"] < r["rmse_before_m"]]
-    print(f"  where the true model replays the held-out recording better than the base fit: "
-          f"{sum(r in right for r in tellable)}/{len(tellable)}; where it does not: "
-          f"{sum(r in right for r in concealed if r['rmse_true_m'] is not None and r not in tellable)}/"
-          f"{sum(r['rmse_true_m'] is not None and r not in tellable for r in concealed)}; no true model (pushes): "
-          f"{sum(r in right for r in concealed if r['rmse_true_m'] is None)}/"
-          f"{sum(r['rmse_true_m'] is None for r in concealed)}")
+    groups = {"where the true model replays the held-out recording better than the base fit":
+              lambda r: r["rmse_true_m"] is not None and r["rmse_true_m"] < r["rmse_before_m"],
+              "where it does not": lambda r: r["rmse_true_m"] is not None and r["rmse_true_m"] >= r["rmse_before_m"],
+              "no true model (pushes)": lambda r: r["rmse_true_m"] is None}
+    print("  " + "; ".join(f"{label}: {sum(r['found'] == r['concealed'] for r in concealed if of(r))}/"
+                           f"{sum(of(r) for r in concealed)}" for label, of in groups.items()))
     for kind in ("free", "joint", "push"):
         for name in sorted({r["concealed"] for r in concealed if r["kind"] == kind}):
             of = [r for r in concealed if r["concealed"] == name and r["kind"] == kind]

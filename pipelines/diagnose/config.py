@@ -28,6 +28,9 @@ class DiagnoseConfig:
     of a non-uniform density."""
     max_delay_s: float = 0.05
     """Search range of time_delay [s], either sign."""
+    prior_mass_factor: float = 4.0
+    """A mass this many times above or below the geometry prior's is beyond what any material allows: a jointed
+    part's is flagged doubtful, and a held body's refit with effects reads its prior's mass range as this wide."""
     unexplained_share: float = 0.2
     """A stretch holding at least this share of a non-white residual is reported as unexplained."""
     window_s: float = 0.1

@@ -139,9 +139,8 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
     prior: the part's prior body (object frame). Every candidate set is refitted with the body in Newton on
     the training recordings and replayed, in windows from smoothed starts, on the evaluation recordings
     (the held-out one by a fit on the trials and each trial by a fit on the held-out one; without it, each
-    half of the trial fitted on the other). A candidate is kept when
-    it predicts the windows significantly better than the base model (`predicts_better`), a pair when it beats
-    its better member too.
+    half of the trial fitted on the other). A candidate is kept when it predicts the windows significantly
+    better than the base model (`predicts_better`), a pair when it beats its better member too.
 
     Returns (Diagnosis, the identification on all trials with the chosen effects, or None if none is chosen).
     """
@@ -278,7 +277,8 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
     doubtful = []
     if state:
         doubtful += ["friction", "mass" if joint.type == "prismatic" else "inertia"]
-    if not 0.25 * prior.mass <= final.inertial.mass <= 4 * prior.mass and "mass" not in doubtful:
+    if not prior.mass / config.prior_mass_factor <= final.inertial.mass <= prior.mass * config.prior_mass_factor \
+            and "mass" not in doubtful:
         doubtful.append("mass")  # far outside what the geometry and any material allow
     traces = {"t_s": windows.t_s.reshape(-1).tolist(),
               "measured_position": joint.tracked_position(windows.q[1:]).reshape(-1, 3).tolist(),

@@ -27,8 +27,8 @@ from scipy.optimize import minimize_scalar
 from assets import Effect, FitMetrics, Inertial, Pose
 from pipelines.identify import (
     DataTerm, FreeBodyRollout, IdentifyConfig, NewtonEulerRows, concat_windows, identify_posterior, make_windows,
-    nearest_physical_inertia,
-    newton_euler_rows, object_frame_from_pi, predicts_better, recording_noise_levels, renoised, theta_from_physical,
+    nearest_physical_inertia, newton_euler_rows, object_frame_from_pi, predicts_better, recording_noise_levels,
+    renoised, theta_from_physical,
 )
 
 from .config import DiagnoseConfig
@@ -290,7 +290,8 @@ def _newton_refit(trials, X_tracked_body: Pose, inertial: Inertial, effect: np.n
     return x, losses
 
 
-def _refit_with_effects(lib: Library, names, model: _Model, X_tracked_body: Pose, prior: Inertial):
+def _refit_with_effects(lib: Library, names, model: _Model, X_tracked_body: Pose, prior: Inertial,
+                        config: DiagnoseConfig):
     """The body refitted with the effects as a build identifies one (`identify_posterior`): least squares' pi
     (at the model's delay) with the information left about it once the coefficients of `names` (the additive
     effects) are profiled out, and the uniform-density prior where that is weak. Least squares alone put a
@@ -298,9 +299,10 @@ def _refit_with_effects(lib: Library, names, model: _Model, X_tracked_body: Pose
     the PosteriorResult."""
     information = np.linalg.pinv(_covariance(lib, names)[:10, :10])
     data = DataTerm(model.pi, 0.5 * (information + information.T))
-    # mass bounds as wide as the jointed guard's: least squares' mass is well determined (within 3 % on every
-    # bench row) and only the shape needs the prior
-    return identify_posterior([data], X_tracked_body, prior, (0.25 * prior.mass, 4.0 * prior.mass))
+    # the widest mass any material allows: least squares' mass is well determined (within 3 % on every bench
+    # row) and only the shape needs the prior
+    k = config.prior_mass_factor
+    return identify_posterior([data], X_tracked_body, prior, (prior.mass / k, prior.mass * k))
 
 
 def mesh_com_std(prior: Inertial, config: DiagnoseConfig) -> np.ndarray:
@@ -355,7 +357,7 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
     after_inertial, prior_dominated = _physical(found_inertial), ()
     if best:  # the body a build keeps: where the effects leave it weakly determined, the prior
         posterior = _refit_with_effects(fitted_lib, tuple(n for n in best if n != "time_delay"), model,
-                                        X_tracked_body, prior)
+                                        X_tracked_body, prior, config)
         after_inertial, prior_dominated = posterior.inertial, posterior.prior_dominated
     evaluation = holdout if holdout is not None else trials[0]
     # a bias constant in world axes (a world-frame message) is no term of the rollout's effect vector (tracked
