@@ -42,9 +42,8 @@ def held_asset(p: Prepared) -> Identified:
         log_diagnosis(diagnosis, log)
         if refit is not None:
             # the identification lacked the effect, so its estimate is biased: the refit with it is kept
-            inertial, fit_final = refit, diagnosis.fits["after"]
-            fit_baseline = diagnosis.fits["before"]
-            dominated = set(diagnosis.prior_dominated)
+            inertial, covariance, dominated = refit.inertial, refit.covariance, set(refit.prior_dominated)
+            fit_final = diagnosis.fits["after_unsmoothed"]  # measured as the identification's replays
 
     if config.mass_kg is not None:
         inertial, covariance = with_weighed_mass(inertial, covariance, *config.mass_kg)
@@ -96,9 +95,13 @@ def _held_theta(inertial, covariance, dominated: set, prior) -> Theta:
 def replay_free(p: Prepared, mjcf_path, asset, recording, X_tracked_body, window_s, diagnosis) -> dict:
     """The exported MJCF replaying the evaluation recording in MuJoCo beside Newton's replay of the fit, and
     both against the sensors' noise alone: the best any model could do on this recording."""
+    from pipelines.diagnose import without_recording_effects
+
+    # the recording's own effects are taken off it, as the Newton replay of the fit does
+    recording = without_recording_effects(recording, [(e.name, e.params) for e in asset.effects])
     mujoco = p.timer.run("replay (MuJoCo)", replay_held_mujoco, mjcf_path, asset, recording, X_tracked_body, window_s)
     newton = asset.fit.final.rmse_position_m
-    floor = diagnosis.noise_floor.get("rmse_position_m") if diagnosis and diagnosis.noise_floor else None
+    floor = diagnosis.noise_floor["unsmoothed"]["rmse_position_m"] if diagnosis and diagnosis.noise_floor else None
     p.log(f"replay of {Path(recording.path).name}: MuJoCo "
           f"{1000 * mujoco['rmse_position_m']:.3f} mm, Newton {1000 * newton:.3f} mm"
           + (f", the sensors' noise alone {1000 * floor:.3f} mm" if floor else ""))

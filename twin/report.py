@@ -84,7 +84,6 @@ def diagnosis_plots(traces: dict) -> str:
     import matplotlib.pyplot as plt
 
     t = np.asarray(traces["residual_t_s"])
-    order = np.argsort(t, kind="stable")
     # several evaluation recordings, each on its own clock, interleave in time: points, not a line between them
     style = {"lw": 0.8} if np.all(np.diff(t) >= 0) else {"ls": "none", "marker": ".", "ms": 2}
     # a wrench residual has force and torque channels, a pushed object's replay position and heading errors,
@@ -96,7 +95,9 @@ def diagnosis_plots(traces: dict) -> str:
     for ax, (part, label) in zip(axes, parts):
         for key, color in (("residual_before", "tab:red"), ("residual_after", "tab:blue")):
             r = np.linalg.norm(np.asarray(traces[key])[:, part], axis=1)
-            ax.plot(t[order], r[order], color=color, label=key.split("_")[1], **style)
+            t_key = np.asarray(traces.get(f"{key}_t_s", t))  # its own rows where they differ (a delay)
+            order = np.argsort(t_key, kind="stable")
+            ax.plot(t_key[order], r[order], color=color, label=key.split("_")[1], **style)
         ax.set_ylabel(f"|{label} residual| [noise]")
     axes[0].legend(loc="upper right")
     axes[0].set_title("What the model leaves unexplained, before and after the chosen effects")
@@ -128,7 +129,9 @@ def diagnosis_section(asset: dict, traces: dict | None) -> str:
     findings = "".join(f"<li>{html.escape(f)}</li>" for f in d.get("findings", [])) or "<li>residual white</li>"
     inclusion = ", ".join(f"{html.escape(k)} {v:.2f}" for k, v in d["screening"]["inclusion"].items())
     # the error no model of this recording can remove, beside what the models left
-    rows = {**d["fits"], **({"sensor noise alone (estimated)": d["noise_floor"]} if "noise_floor" in d else {})}
+    floor = d.get("noise_floor", {})
+    rows = {**d["fits"], **({"sensor noise alone (estimated)": floor} if floor else {}),
+            **({"sensor noise alone, unsmoothed (estimated)": floor["unsmoothed"]} if "unsmoothed" in floor else {})}
     fits = "".join(f"<tr><td>{k}</td><td>{v['rmse_position_m'] * 1000:.3f}</td><td>{v['rmse_rotation_rad']:.5f}</td>"
                    "</tr>" for k, v in rows.items())
     plot = f'<img src="data:image/png;base64,{diagnosis_plots(traces)}">' if traces else ""

@@ -10,7 +10,7 @@ from .config import DiagnoseConfig
 
 _WHERE = {
     "CANDIDATES": "effects", "EFFECT_NAMES": "effects", "NONUNIFORM_DENSITY": "effects", "Candidate": "effects",
-    "main_magnitude": "effects",
+    "main_magnitude": "effects", "without_recording_effects": "effects",
     "JOINT_CANDIDATES": "joint", "diagnose_jointed": "joint", "joint_effect_params": "joint", "replay_fit": "joint",
     "PUSHED_CANDIDATES": "pushed", "diagnose_pushed": "pushed",
     "ResidualAnalysis": "residuals", "analyse_residuals": "residuals", "describe": "residuals",

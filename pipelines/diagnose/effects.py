@@ -94,6 +94,29 @@ def remove_bias(recording, force_n, torque_nm):
     return replace(recording, wrench=wrench)
 
 
+def without_recording_effects(recording, effects):
+    """`recording` as the object saw it: the wrench without a `sensor_bias` (constant in world axes, or in the
+    tracked frame's where its message turns with it, as `diagnose_held` reports it) and as it acted under a
+    `time_delay` (`Recording.wrench_acted`). effects: (name, params) pairs; others are ignored.
+    """
+    from scipy.spatial.transform import Rotation, Slerp
+
+    for name, params in effects:
+        w = recording.wrench
+        if name == "time_delay":
+            raw = recording.wrench_raw
+            recording = replace(recording, wrench=recording.wrench_acted(params["seconds"]),
+                                wrench_raw=replace(raw, t_s=raw.t_s - params["seconds"]))
+        elif name == "sensor_bias" and not bias_in_tracked_axes(recording):
+            recording = remove_bias(recording, params["force"], params["torque"])
+        elif name == "sensor_bias":
+            p = recording.pose
+            R = Slerp(p.t_s, Rotation.from_quat(p.quat_xyzw))(np.clip(w.t_s, p.t_s[0], p.t_s[-1]))
+            recording = replace(recording, wrench=replace(w, force=w.force - R.apply(params["force"]),
+                                                          torque=w.torque - R.apply(params["torque"])))
+    return recording
+
+
 def _bias_columns(rows, com_tracked):
     R = getattr(rows, "tracked_from_message", None)
     if R is None:

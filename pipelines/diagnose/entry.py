@@ -7,7 +7,6 @@ from dataclasses import replace
 from pipelines.identify import HeldBody, JointedPart, PushedBody, Subject
 
 from .config import DiagnoseConfig
-from .effects import CANDIDATES
 from .joint import diagnose_jointed
 from .pushed import diagnose_pushed
 from .select import Diagnosis, diagnose_held
@@ -17,14 +16,14 @@ def diagnose(subject: Subject, trials: list, holdout=None, config: DiagnoseConfi
     """Diagnose `subject` from `trials` (Recordings); `holdout` (a Recording or None) chooses and validates.
 
     Returns (Diagnosis, refit): the refit is the body identified again with the chosen effects (a held body's
-    Inertial, a pushed body's SlidingFit, a part's JointedIdentification), or None where no effect needed one.
+    PosteriorResult, a pushed body's SlidingFit, a part's JointedIdentification), or None where no effect
+    needed one.
     """
     match subject:
         case HeldBody():
             diagnosis: Diagnosis = diagnose_held(trials, holdout, subject.X_tracked_body, subject.uniform,
                                                  replace(config, window_s=subject.window_s))
-            refitted = any(e.name in CANDIDATES for e in diagnosis.effects)
-            return diagnosis, diagnosis.inertial["after"] if refitted else None
+            return diagnosis, diagnosis.posterior
         case PushedBody():
             return diagnose_pushed(trials, [holdout] if holdout else [], subject.body, subject.mu_prior,
                                    subject.config, config)

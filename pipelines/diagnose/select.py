@@ -41,9 +41,11 @@ from .screening import Library, Screening, bic, build_library, fit_subset, scree
 class Diagnosis:
     """What was found. effects: most certain first; unexplained: DESIGN.md entries; scores:
     held-out criterion per candidate set (lower is better); fits: Newton windowed replay of the
-    evaluation recording before and after; residuals: wrench residual analysis before and after
+    evaluation recording before and after (held bodies: from smoothed states, and "after_unsmoothed" from
+    the measured ones); residuals: wrench residual analysis before and after
     on the evaluation recording; traces: arrays for the report; noise_floor: how much of the
-    after replay's error the sensors' noise alone accounts for (`noise_floor`), held bodies only: on joints
+    after replay's error the sensors' noise alone accounts for (`noise_floor`; "unsmoothed": of
+    "after_unsmoothed"'s), held bodies only: on joints
     the same estimate came out 0-1.7 times the true model's error and above the error it is a share of in 12
     of 20 bench rows, so it is not given there."""
 
@@ -61,8 +63,9 @@ class Diagnosis:
     doubtful: tuple[str, ...] = ()
     """Parameters of the body a mismatch no candidate explains may have corrupted ("mass", "com", "inertia",
     "friction"): not to be published as measured without a flag (asset.json flags)."""
-    prior_dominated: tuple[str, ...] = ()
-    """A held body's `FLAT_INERTIAL` entries of `inertial["after"]` that its prior, not the recordings, set."""
+    posterior: object = None
+    """A held body's refit with the chosen effects, `inertial["after"]` as the build keeps it (`PosteriorResult`:
+    its covariance and the `FLAT_INERTIAL` entries its prior, not the recordings, set); None without one."""
 
     def provenance(self) -> dict:
         return {
@@ -224,18 +227,19 @@ def _residual(rows: NewtonEulerRows, model: _Model, com_tracked: np.ndarray) -> 
 
 
 def replay_held(recording, X_tracked_body: Pose, inertial: Inertial, effect: np.ndarray, delay_s: float,
-                window_s: float) -> tuple[FitMetrics, dict]:
+                window_s: float, smoothed: bool = True) -> tuple[FitMetrics, dict]:
     """Newton windowed replay of `recording` with the effects; position error and traces (with the mean
     squared position error per window [m^2], "window_mse").
 
     Poses and wrench are low-passed (zero phase) at the identification's cutoff first, so each window starts
     from the smoothed measured state and is compared with the smoothed track: tracker noise on a start
-    velocity would otherwise set a floor that hides any effect below it. Before and after alike.
+    velocity would otherwise set a floor that hides any effect below it. Before and after alike. With
+    `smoothed` False, from the measured states as they are, as asset.json's `fit` and the MuJoCo replay.
     """
     p, w = recording.pose, recording.wrench_acted(delay_s)
     id_config = IdentifyConfig()
     windows = make_windows(p.t_s, p.position, p.quat_xyzw, w.t_s, w.force, w.torque, window_s=window_s,
-                           substeps=id_config.substeps, smoothing_hz=id_config.smoothing_hz)
+                           substeps=id_config.substeps, smoothing_hz=id_config.smoothing_hz if smoothed else None)
     rollout = FreeBodyRollout(windows, X_tracked_body, sets=1, requires_grad=False)
     theta = theta_from_physical(inertial.mass, inertial.com, inertial.inertia_matrix())[None]
     r = rollout.residuals(theta, momentum_scaled=False, effect=effect[None])[:, 0]
@@ -354,11 +358,11 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
     before_inertial = _physical(object_frame_from_pi(baseline.pi, X_tracked_body)[0])
     if density:
         before_inertial = replace(before_inertial, com=tuple(prior.com))
-    after_inertial, prior_dominated = _physical(found_inertial), ()
+    after_inertial, posterior = _physical(found_inertial), None
     if best:  # the body a build keeps: where the effects leave it weakly determined, the prior
         posterior = _refit_with_effects(fitted_lib, tuple(n for n in best if n != "time_delay"), model,
                                         X_tracked_body, prior, config)
-        after_inertial, prior_dominated = posterior.inertial, posterior.prior_dominated
+        after_inertial = posterior.inertial
     evaluation = holdout if holdout is not None else trials[0]
     # a bias constant in world axes (a world-frame message) is no term of the rollout's effect vector (tracked
     # axes): it is taken off the recordings the rollouts replay instead
@@ -420,8 +424,15 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
         e.evidence.update({"heldout_rmse_position_before_m": fit_before.rmse_position_m,
                            "heldout_rmse_position_after_m": fit_after.rmse_position_m})
 
-    floor = noise_floor(replayed(evaluation), lambda r: replay_held(r, X_tracked_body, after_inertial, effect,
-                                                                    model.delay_s, config.window_s)[0], fit_after, rng)
+    def replay_after(recording, smoothed=True):
+        return replay_held(recording, X_tracked_body, after_inertial, effect, model.delay_s, config.window_s,
+                           smoothed)[0]
+
+    floor = noise_floor(replayed(evaluation), replay_after, fit_after, rng)
+    # what a build reports (asset.json's fit, beside the MuJoCo replay of its exports): from measured states
+    fit_unsmoothed = replay_after(replayed(evaluation), smoothed=False)
+    floor_unsmoothed = noise_floor(replayed(evaluation), lambda r: replay_after(r, smoothed=False), fit_unsmoothed,
+                                   rng)
 
     eval_rows_before = _rows(evaluation)
     eval_rows_after = _rows(evaluation, model.delay_s)
@@ -434,14 +445,17 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
     left = unexplained(residuals["after"], config.unexplained_share)
     traces = {"t_s": trace_before["t_s"], "measured_position": trace_before["measured_position"],
               "before_position": trace_before["position"], "after_position": trace_after["position"],
-              "window_s": trace_before["window_s"], "residual_t_s": eval_rows_after.t_s.tolist(),
+              "window_s": trace_before["window_s"], "residual_t_s": eval_rows_before.t_s.tolist(),
+              # a delay shifts the rows the after model's residual is read on
+              "residual_after_t_s": eval_rows_after.t_s.tolist(),
               "residual_before": _residual(eval_rows_before, baseline, com_tracked).tolist(),
               "residual_after": _residual(eval_rows_after, model, com_tracked).tolist()}
     return Diagnosis(
         effects=tuple(effects), unexplained=left, screening=screening, scores=scores,
-        fits={"before": fit_before, "after": fit_after}, residuals=residuals,
+        fits={"before": fit_before, "after": fit_after, "after_unsmoothed": fit_unsmoothed}, residuals=residuals,
         findings=tuple(describe(residuals["before"])), inertial={"before": before_inertial, "after": after_inertial},
-        heldout=holdout is not None, traces=traces, noise_floor=floor, prior_dominated=prior_dominated,
+        heldout=holdout is not None, traces=traces, posterior=posterior,
+        noise_floor={**floor, "unsmoothed": {k: floor_unsmoothed[k] for k in ("rmse_position_m", "rmse_rotation_rad")}},
         # what no candidate explains was absorbed by the body's least squares: its values are not measured
         doubtful=("mass", "com", "inertia") if sum(u["share"] for u in left) >= config.unexplained_share else (),
     )

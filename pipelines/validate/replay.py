@@ -48,9 +48,11 @@ def replay_held_mujoco(mjcf_path: Path, asset: Asset, recording, X_tracked_body,
 
     Each window starts from the measured pose and the velocity estimated from the poses (unsmoothed, as
     the build's own replay); at each step the measured force [N, world] acts on the body and the
-    measured torque about the tracked origin is moved to the COM, where `xfrc_applied` acts. Returns the
-    RMSE of the tracked frame's position [m] and rotation [rad]. X_tracked_body: the object frame in the
-    tracked frame (`Pose`).
+    measured torque about the tracked origin is moved to the COM, where `xfrc_applied` acts. The object's
+    `viscous_damping` and `quadratic_drag` in `asset.effects` act there too (-b v_com and -b_angular omega,
+    -c |v_com| v_com): a free joint's `damping` is one value for its six velocities, so the MJCF cannot
+    carry them. Returns the RMSE of the tracked frame's position [m] and rotation [rad].
+    X_tracked_body: the object frame in the tracked frame (`Pose`).
     """
     import mujoco
     from scipy.spatial.transform import Rotation
@@ -66,6 +68,9 @@ def replay_held_mujoco(mjcf_path: Path, asset: Asset, recording, X_tracked_body,
     body, qadr, vadr = mujoco_free_body(model, asset, mjcf_path)
     p_tb, R_tb = np.asarray(X_tracked_body.position), X_tracked_body.rotation_matrix()
     tracked_in_body = -R_tb.T @ p_tb
+    effects = {e.name: e.params for e in asset.effects}
+    b, b_angular = (effects.get("viscous_damping", {}).get(k, 0.0) for k in ("b", "b_angular"))
+    c = effects.get("quadratic_drag", {}).get("c", 0.0)
     position_error, rotation_error = [], []
     for k in range(w.window_count):
         mujoco.mj_resetData(model, data)
@@ -78,10 +83,13 @@ def replay_held_mujoco(mjcf_path: Path, asset: Asset, recording, X_tracked_body,
         data.qvel[vadr + 3:vadr + 6] = R_b.T @ omega  # and body-axes angular velocity
         mujoco.mj_forward(model, data)
         for step in range(w.step_count):
-            p_track = data.xpos[body] + data.xmat[body].reshape(3, 3) @ tracked_in_body
+            R = data.xmat[body].reshape(3, 3)
+            p_track = data.xpos[body] + R @ tracked_in_body
             force, torque = w.wrench[step, k, :3], w.wrench[step, k, 3:]
-            data.xfrc_applied[body, :3] = force
-            data.xfrc_applied[body, 3:] = torque + np.cross(p_track - data.xipos[body], force)
+            spin = R @ data.qvel[vadr + 3:vadr + 6]
+            v_com = data.qvel[vadr:vadr + 3] + np.cross(spin, data.xipos[body] - data.xpos[body])
+            data.xfrc_applied[body, :3] = force - (b + c * np.linalg.norm(v_com)) * v_com
+            data.xfrc_applied[body, 3:] = torque + np.cross(p_track - data.xipos[body], force) - b_angular * spin
             mujoco.mj_step(model, data)
             if (step + 1) % w.substeps == 0:
                 s = (step + 1) // w.substeps

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from assets import FLAT_INERTIAL
+from assets import FLAT_INERTIAL, flat_inertial
 from benchmarks.diagnose import Case, record_case, true_model_fit
 from pipelines.diagnose import DiagnoseConfig, diagnose_held
 from pipelines.synth.effects import concealed_effect
@@ -189,4 +189,8 @@ def test_body_refitted_with_a_strong_damping_keeps_a_plausible_inertia(tmp_path)
     assert after.physical_violation() is None
     error = np.linalg.norm(after.inertia_matrix() - truth.inertia_matrix()) / np.linalg.norm(truth.inertia_matrix())
     assert error < 0.15
-    assert set(diagnosis.prior_dominated) <= set(FLAT_INERTIAL)
+    # what the build publishes with it (asset.json's std and intervals): the refit's own covariance
+    posterior = diagnosis.posterior
+    assert posterior.inertial == after and set(posterior.prior_dominated) <= set(FLAT_INERTIAL)
+    lower, upper = posterior.interval95()
+    assert np.all((lower <= flat_inertial(truth)) & (flat_inertial(truth) <= upper))
