@@ -83,18 +83,19 @@ def replay_held_mujoco(mjcf_path: Path, asset: Asset, recording, X_tracked_body,
         data.qvel[vadr + 3:vadr + 6] = R_b.T @ omega  # and body-axes angular velocity
         mujoco.mj_forward(model, data)
         for step in range(w.step_count):
-            R = data.xmat[body].reshape(3, 3)
-            p_track = data.xpos[body] + R @ tracked_in_body
+            # qpos, not xpos: mj_step leaves the kinematics at the state before its integration
+            R, origin = rotation_from_wxyz(data.qpos[qadr + 3:qadr + 7]), data.qpos[qadr:qadr + 3]
+            com_arm = R @ model.body_ipos[body]
             force, torque = w.wrench[step, k, :3], w.wrench[step, k, 3:]
             spin = R @ data.qvel[vadr + 3:vadr + 6]
-            v_com = data.qvel[vadr:vadr + 3] + np.cross(spin, data.xipos[body] - data.xpos[body])
+            v_com = data.qvel[vadr:vadr + 3] + np.cross(spin, com_arm)
             data.xfrc_applied[body, :3] = force - (b + c * np.linalg.norm(v_com)) * v_com
-            data.xfrc_applied[body, 3:] = torque + np.cross(p_track - data.xipos[body], force) - b_angular * spin
+            data.xfrc_applied[body, 3:] = torque + np.cross(R @ tracked_in_body - com_arm, force) - b_angular * spin
             mujoco.mj_step(model, data)
             if (step + 1) % w.substeps == 0:
                 s = (step + 1) // w.substeps
-                R = data.xmat[body].reshape(3, 3)
-                position_error.append(data.xpos[body] + R @ tracked_in_body - w.measured_position[s, k])
+                R = rotation_from_wxyz(data.qpos[qadr + 3:qadr + 7])
+                position_error.append(data.qpos[qadr:qadr + 3] + R @ tracked_in_body - w.measured_position[s, k])
                 R_meas = Rotation.from_quat(w.measured_quat_xyzw[s, k]).as_matrix()
                 rotation_error.append(Rotation.from_matrix((R @ R_tb.T).T @ R_meas).magnitude())
     e = np.asarray(position_error)
