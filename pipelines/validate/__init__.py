@@ -30,9 +30,11 @@ Modules: `loaders` (one reader per loader and format), `exports` (`validate_expo
 from .exports import validate_exports
 from .jointed import validate_jointed_exports
 from .loaders import LOADERS
-from .replay import replay_held_mujoco, replay_jointed_mujoco, replay_pushed_model, replay_pushed_mujoco
+from .replay import (
+    pushed_effects, replay_held_mujoco, replay_jointed_mujoco, replay_pushed_model, replay_pushed_mujoco,
+)
 from .report import DEFAULT_TOLERANCE, LoaderCheck, ValidationError, ValidationReport
 
-__all__ = ["DEFAULT_TOLERANCE", "LOADERS", "LoaderCheck", "ValidationError", "ValidationReport", "replay_held_mujoco",
-           "replay_jointed_mujoco", "replay_pushed_model", "replay_pushed_mujoco", "validate_exports",
-           "validate_jointed_exports"]
+__all__ = ["DEFAULT_TOLERANCE", "LOADERS", "LoaderCheck", "ValidationError", "ValidationReport", "pushed_effects",
+           "replay_held_mujoco", "replay_jointed_mujoco", "replay_pushed_model", "replay_pushed_mujoco",
+           "validate_exports", "validate_jointed_exports"]

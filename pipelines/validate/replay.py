@@ -118,7 +118,7 @@ def replay_pushed_mujoco(scene_path: Path, asset: Asset, recording, window_s: fl
     pusher meets the object at only tilts it, and planar recordings put it at z = 0), through
     `xfrc_applied` as that force at the COM plus its moment. The recorded force is what acted; a kinematic
     pusher would replay the pusher's path instead and need its shape and contact stiffness, which the
-    recordings do not carry. Effects in `asset.effects` are not applied.
+    recordings do not carry. The effects in `asset.effects` act as the sliding model's do (`pushed_effects`).
 
     Returns SI values: "rmse_position_m" and "rmse_heading_rad" over every pose sample of every window
     (as asset.json → fit), "rmse_final_position_m" and "rmse_final_heading_rad" over the windows' last
@@ -137,15 +137,29 @@ def replay_pushed_mujoco(scene_path: Path, asset: Asset, recording, window_s: fl
     inertial = asset.theta.inertial()
     planar = PlanarBody(tuple(0.5 * (vertices.max(axis=0) - vertices.min(axis=0))), inertial.mass,
                         float(inertial.inertia_matrix()[2, 2]))
-    return replay_pushed_model(model, mjcf_name(asset.name), planar, recording, window_s, config, where=scene_path)
+    return replay_pushed_model(model, mjcf_name(asset.name), planar, recording, window_s, config, where=scene_path,
+                               effects=pushed_effects(asset.effects))
+
+
+def pushed_effects(effects) -> dict[str, np.ndarray]:
+    """A pushed asset's effects as the sliding model's parameters (`pipelines.identify.sliding.EFFECT_SLOTS`):
+    the force bias left after the zeros' in world x, y [N], damping b [N s/m] and b_angular [N m s], the
+    wrench's delay [s] and the contact point's offset in world x, y [m]."""
+    read = {"sensor_bias": lambda e: e.evidence["force_world_n"][:2],
+            "viscous_damping": lambda e: (e.params["b"], e.params["b_angular"]),
+            "time_delay": lambda e: (e.params["seconds"],),
+            "contact_offset": lambda e: e.params["offset_m"][:2]}
+    return {e.name: np.asarray(read[e.name](e), dtype=float) for e in effects if e.name in read}
 
 
 def replay_pushed_model(model, body_name: str, planar, recording, window_s: float = 0.5, config=None,
-                        where: Path | str = "model") -> dict:
+                        where: Path | str = "model", effects: dict | None = None) -> dict:
     """`replay_pushed_mujoco` on a compiled MuJoCo model whose body `body_name` sits on a free joint above a
     support plane: the exported scene, or the model that made a synthetic recording (its truth), so both
     replay the same windows the same way. planar: the `PlanarBody` the windows are cut for (its half
-    extents set how near the pusher counts as touching); the model's own time step is the replay's."""
+    extents set how near the pusher counts as touching); the model's own time step is the replay's.
+    effects: `pushed_effects`, applied as the sliding model's kernels apply them: the bias off the force, the
+    force read `time_delay` later, at the contact point plus the offset, and damping at the COM."""
     from dataclasses import replace
 
     import mujoco
@@ -167,7 +181,15 @@ def replay_pushed_model(model, body_name: str, planar, recording, window_s: floa
     config = replace(config or SlidingConfig(), window_s=window_s, dt_s=float(model.opt.timestep))
     w = push_windows(recording, planar, config, estimate_force_bias(recording, config))
     model.opt.timestep = w.dt_s
-    force, contact = w.window_force, w.contact
+    effects = effects or {}
+    bias, offset = (effects.get(name, np.zeros(2)) for name in ("sensor_bias", "contact_offset"))
+    b, b_angular = effects.get("viscous_damping", np.zeros(2))
+    # the force acting at a step was read the delay later (`apply_pusher_force`), between the margin's steps
+    at = w.force_margin + np.arange(w.step_count) + effects.get("time_delay", np.zeros(1))[0] / w.dt_s
+    i = np.clip(np.floor(at).astype(int), 0, w.force.shape[0] - 2)
+    a = np.clip(at - i, 0.0, 1.0)[:, None, None]
+    force = w.force[i] * (1 - a) + w.force[i + 1] * a - bias
+    contact = w.contact + offset
     S, W = w.sample_count, w.window_count
     simulated = np.zeros((S, W, 3))
     for k in range(W):
@@ -180,9 +202,13 @@ def replay_pushed_model(model, body_name: str, planar, recording, window_s: floa
         data.qvel[vadr + 3:vadr + 6] = R.T @ np.array([0.0, 0.0, yaw_rate])  # and body-axes angular velocity
         mujoco.mj_forward(model, data)
         for step in range(w.step_count):
-            f = np.array([*force[step, k], 0.0])
-            arm = np.array([*(contact[step, k] - data.xipos[body, :2]), 0.0])
-            data.xfrc_applied[body] = np.r_[f, np.cross(arm, f)]
+            R = rotation_from_wxyz(data.qpos[qadr + 3:qadr + 7])
+            arm_com = R @ model.body_ipos[body]  # qpos, not xipos: see below
+            spin = R @ data.qvel[vadr + 3:vadr + 6]
+            v_com = data.qvel[vadr:vadr + 3] + np.cross(spin, arm_com)
+            f = np.array([*(force[step, k] - b * v_com[:2]), 0.0])
+            arm = np.array([*(contact[step, k] - data.qpos[qadr:qadr + 2] - arm_com[:2]), 0.0])
+            data.xfrc_applied[body] = np.r_[f, np.cross(arm, f) - [0.0, 0.0, b_angular * spin[2]]]
             mujoco.mj_step(model, data)
             if (step + 1) % w.substeps == 0:
                 # qpos, not xpos: mj_step leaves the kinematics at the state before its integration

@@ -71,6 +71,26 @@ def test_truth_model_replays_its_own_recording(tmp_path):
     assert errors[0.3] < 2e-3 and errors[0.36] > 4 * errors[0.3]
 
 
+def test_truth_model_replays_a_push_with_its_effects(tmp_path):
+    """A push with a concealed 30 ms delay and damping: the model that made it, given those effects as a
+    pushed asset carries them (`pushed_effects`), replays it far closer than without them."""
+    from assets import Effect
+    from pipelines.validate import pushed_effects
+
+    config = PushConfig(mu=0.3, mass_kg=0.8, offset_m=0.015, yaw0_rad=0.2, push_s=1.2, delay_s=0.03,
+                        damping_n_s_m=3.0, **QUIET)
+    write_pushed_mujoco(tmp_path / "push.mcap", config)
+    rec = read_recording(tmp_path / "push.mcap")
+    planar = PlanarBody(config.half_extents_m, config.mass_kg, 1e-3)
+    effects = pushed_effects((Effect("time_delay", {"seconds": 0.03}, {}),
+                              Effect("viscous_damping", {"b": 3.0, "b_angular": 0.0}, {})))
+    errors = {}
+    for label, given in (("without", None), ("with", effects)):
+        model = mujoco.MjModel.from_xml_string(pushed_block_xml(config, push_settings(), PushContact(), pusher=False))
+        errors[label] = replay_pushed_model(model, "block", planar, rec, 0.3, effects=given)["rmse_position_m"]
+    assert errors["with"] < 2e-3 and errors["without"] > 2 * errors["with"]
+
+
 def test_mesh_block_and_torsional_contact_simulate(tmp_path):
     """The block as a mesh geom with condim 4 under RK4, and on a grid of support spheres: finite pushes that
     move the block; a time constant under two steps is refused."""
