@@ -94,9 +94,10 @@ def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0, engine: str = "
     return rows
 
 
-def mjcf_heldout_replay(directory: Path, obj, joint, inertial, friction: float, heldout) -> float:
+def mjcf_heldout_replay(directory: Path, obj, joint, inertial, friction: float, heldout, effects=()) -> float:
     """RMSE [m] of the tracked frame when MuJoCo replays `heldout` (`replay_jointed_mujoco`, windows from
-    measured states) with the MJCF twin exports for the part with this body and joint friction on `joint`."""
+    measured states) with the MJCF twin exports for the part with this body and joint friction on `joint`,
+    and the asset's `effects` (assets.Effect)."""
     from assets import Asset, Estimate, Geometry, Joint, Material, Theta
     from exporters.mjcf import export_mjcf
     from pipelines.validate import replay_jointed_mujoco
@@ -108,7 +109,7 @@ def mjcf_heldout_replay(directory: Path, obj, joint, inertial, friction: float, 
                   Estimate(float(friction), 0.0))
     asset = Asset(obj.name, joint.type, obj.placement(), theta, Geometry("meshes/visual.obj", ("meshes/collision.obj",)),
                   Material("unknown", 1000.0, 0.5), Joint(joint.type, tuple(joint.axis), tuple(joint.origin), -10.0,
-                                                          10.0))
+                                                          10.0), effects=tuple(effects))
     return replay_jointed_mujoco(export_mjcf(asset, directory), asset, heldout, joint)["rmse_position_m"]
 
 

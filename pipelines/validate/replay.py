@@ -17,7 +17,10 @@ def replay_jointed_mujoco(mjcf_path: Path, asset: Asset, recording, joint_fit, c
     # joint_fit: the JointFit asset.joint was written from (same axis, so the same q)
     """Windowed replay of `recording` in MuJoCo from the exported MJCF: the measured joint effort as
     `qfrc_applied`, each window started from the measured state, the joint's friction and damping
-    as MuJoCo models them (`frictionloss`, `damping`). RMSE of q and of the tracked frame's position."""
+    as MuJoCo models them (`frictionloss`, `damping`). A `stribeck_friction` in `asset.effects`, which no
+    format carries, sets `frictionloss` at each step to f_c + (f_s - f_c) exp(-(qd / v_s)^2): MuJoCo's
+    friction constraint then holds the part up to the breakaway force at rest. RMSE of q and of the tracked
+    frame's position."""
     import mujoco
 
     from pipelines.identify import JointedConfig, joint_windows, q_and_position_rmse
@@ -29,12 +32,16 @@ def replay_jointed_mujoco(mjcf_path: Path, asset: Asset, recording, joint_fit, c
     data = mujoco.MjData(model)
     joint = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint_name(mjcf_name(asset.name)))
     qpos, dof = model.jnt_qposadr[joint], model.jnt_dofadr[joint]
+    stribeck = next((e.params for e in asset.effects if e.name == "stribeck_friction"), None)
     S, W = w.q.shape[0] - 1, w.q.shape[1]
     q = np.zeros((S, W))
     for k in range(W):
         mujoco.mj_resetData(model, data)
         data.qpos[qpos], data.qvel[dof] = w.q_start[k], w.qd_start[k]
         for step in range(S * w.substeps):
+            if stribeck is not None:
+                f_s, f_c, v_s = (stribeck[n] for n in ("f_s", "f_c", "v_s"))
+                model.dof_frictionloss[dof] = f_c + (f_s - f_c) * np.exp(-((data.qvel[dof] / v_s) ** 2))
             data.qfrc_applied[dof] = w.effort[step, k]
             mujoco.mj_step(model, data)
             if (step + 1) % w.substeps == 0:
