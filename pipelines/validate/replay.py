@@ -32,7 +32,8 @@ def replay_jointed_mujoco(mjcf_path: Path, asset: Asset, recording, joint_fit, c
     data = mujoco.MjData(model)
     joint = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint_name(mjcf_name(asset.name)))
     qpos, dof = model.jnt_qposadr[joint], model.jnt_dofadr[joint]
-    stribeck = next((e.params for e in asset.effects if e.name == "stribeck_friction"), None)
+    stribeck = next(((e.params["f_s"], e.params["f_c"], e.params["v_s"]) for e in asset.effects
+                     if e.name == "stribeck_friction"), None)
     S, W = w.q.shape[0] - 1, w.q.shape[1]
     q = np.zeros((S, W))
     for k in range(W):
@@ -40,7 +41,7 @@ def replay_jointed_mujoco(mjcf_path: Path, asset: Asset, recording, joint_fit, c
         data.qpos[qpos], data.qvel[dof] = w.q_start[k], w.qd_start[k]
         for step in range(S * w.substeps):
             if stribeck is not None:
-                f_s, f_c, v_s = (stribeck[n] for n in ("f_s", "f_c", "v_s"))
+                f_s, f_c, v_s = stribeck
                 model.dof_frictionloss[dof] = f_c + (f_s - f_c) * np.exp(-((data.qvel[dof] / v_s) ** 2))
             data.qfrc_applied[dof] = w.effort[step, k]
             mujoco.mj_step(model, data)
