@@ -13,10 +13,13 @@ import math
 import numbers
 from dataclasses import asdict
 from pathlib import Path
+from typing import get_args
 
 import numpy as np
 
-from .model import KINDS, Asset, Effect, Estimate, Fit, FitMetrics, Geometry, Inertial, Joint, Material, Pose, Theta
+from .model import (
+    KINDS, Asset, Effect, Estimate, Fit, FitMetrics, Geometry, Inertial, Joint, Material, Pose, Source, Theta,
+)
 
 SCHEMA = "twin.asset/1"
 _THETA_FIELDS = ("mass", "com", "inertia", "friction")
@@ -171,7 +174,7 @@ class _Checker:
         self.array(f"{key}.value", d["value"], shape)
         if d.get("std") is not None:  # an undetermined quantity's spread may be infinite
             self.array(f"{key}.std", d["std"], shape, low=0.0, finite=False)
-        self.string(f"{key}.source", d.get("source", "measured"), ("measured", "prior"))
+        self.string(f"{key}.source", d.get("source", "measured"), get_args(Source))
         if d.get("interval95") is not None:
             pair = self.list(f"{key}.interval95", d["interval95"])
             if len(pair) != 2:

@@ -32,7 +32,7 @@ def _door() -> Asset:
     """A revolute part with every optional field filled."""
     inertia = ((0.05, 0.001, 0.0), (0.001, 0.04, 0.0), (0.0, 0.0, 0.02))
     theta = Theta(
-        mass=Estimate(2.5, 0.1, interval95=(2.3, 2.7), prior={"mass_kg": 2.4}),
+        mass=Estimate(2.5, 0.1, source="weighed", interval95=(2.3, 2.7), prior={"mass_kg": 2.4}),
         com=Estimate((0.2, 0.0, 0.3), (0.01, 0.01, 0.01), source="prior"),
         inertia=Estimate(inertia, tuple(tuple(abs(x) * 0.1 for x in row) for row in inertia)),
         friction=Estimate(0.3, 0.05, interval95=(0.2, 0.4)),
@@ -88,7 +88,7 @@ _DELETE = object()
     ("theta.mass.value", True, r"theta\.mass\.value: expected a number, got a boolean"),
     ("theta.mass.value", math.nan, r"theta\.mass\.value: expected a finite number, got nan"),
     ("theta.mass.std", -0.1, r"theta\.mass\.std: expected a number >= 0, got -0\.1"),
-    ("theta.mass.source", "guess", r"theta\.mass\.source: expected one of \('measured', 'prior'\)"),
+    ("theta.mass.source", "guess", r"theta\.mass\.source: expected one of \('measured', 'prior', 'weighed'\)"),
     ("theta.com.value", [0.1, 0.2], r"theta\.com\.value: expected 3 numbers, got 2"),
     ("theta.inertia.value.0.1", 0.5, r"theta\.inertia\.value: not symmetric"),
     ("theta.inertia.value.2.2", -0.02, r"theta\.inertia\.value: inertia not positive definite"),
