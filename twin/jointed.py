@@ -63,7 +63,8 @@ def jointed_asset(p: Prepared) -> Identified:
     """Identify the part on its joint, look for missing passive joint forces; the asset exports base + part +
     joint, its validation reloads them, its replay runs the held-out trial in MuJoCo."""
     from pipelines.identify import (
-        JointedConfig, JointedPart, identify_jointed, joint_coordinates, joint_windows, q_and_position_rmse,
+        JointedConfig, JointedPart, identify_jointed, joint_body, joint_coordinates, joint_windows,
+        q_and_position_rmse, replay_jointed,
     )
 
     config, prior, timer, log, holdout = p.config, p.prior, p.timer, p.log, p.holdout
@@ -96,6 +97,14 @@ def jointed_asset(p: Prepared) -> Identified:
                   axis_std_rad=fit.axis_std_rad, origin_std_m=tuple(fit.origin_std_m))
     theta = weighed_where_prior(jointed_theta(kept, prior, fit.type), config.mass_kg)
     held = identified.fits.get("holdout", {})
+    if held:
+        kept_replay = held[identified.selected]
+        if kept is not identified:
+            # the refit replayed as the identification replays its own (its windows, measured starts): beside
+            # the MuJoCo replay and a build without an effect, like for like
+            body = joint_body(fit, p.placement, prior.inertial, jconfig, tuple(found))
+            kept_replay = replay_jointed(holdout, fit, p.placement, prior.inertial, body, kept.values, jconfig)[0]
+        held = {**held, "kept": kept_replay}
     metrics = lambda d: FitMetrics(d["rmse_position_m"], d["rmse_q"] if fit.type == "revolute" else 0.0,  # noqa: E731
                                    d["rmse_q"])
     asset = Asset(
@@ -103,8 +112,7 @@ def jointed_asset(p: Prepared) -> Identified:
         geometry=mesh_geometry(p.parts, p.scan_stats.get("extent"), config.base_mesh),
         material=p.choice.material(prior.material.name, float(theta.mass.value / p.mesh.volume), prior.friction[0]),
         joint=joint,
-        fit=Fit(metrics(held["prior"]), diagnosis.fits["after"] if kept is not identified else
-                metrics(held[identified.selected]), jconfig.window_s) if held else None,
+        fit=Fit(metrics(held["prior"]), metrics(held["kept"]), jconfig.window_s) if held else None,
         effects=diagnosis.effects if diagnosis else (),
         unexplained=diagnosis.unexplained if diagnosis else (),
         flags=(bounds_flags(theta, prior.lower, prior.upper) + extent_flags(p.scan_stats.get("extent"))
@@ -119,11 +127,8 @@ def jointed_asset(p: Prepared) -> Identified:
         # the tracker's noise about the smoothed track: what no model's replay of it can go below
         w = joint_windows(holdout, fit, jconfig)
         floor = q_and_position_rmse(fit, w.q_smoothed[1:], w.q[1:])["rmse_position_m"]
-        result = {"mujoco": mujoco,
-                  "newton": held[identified.selected] if kept is identified else
-                  {"rmse_q": diagnosis.fits["after"].loss,
-                   "rmse_position_m": diagnosis.fits["after"].rmse_position_m},
-                  "noise_floor_m": floor, "mujoco_over_noise_floor": mujoco["rmse_position_m"] / floor}
+        result = {"mujoco": mujoco, "newton": held["kept"], "noise_floor_m": floor,
+                  "mujoco_over_noise_floor": mujoco["rmse_position_m"] / floor}
         log(f"held-out replay: MuJoCo {1000 * mujoco['rmse_position_m']:.3f} mm, Newton "
             f"{1000 * result['newton']['rmse_position_m']:.3f} mm, the tracker's noise alone {1000 * floor:.3f} mm")
         return result
