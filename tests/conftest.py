@@ -30,6 +30,24 @@ def run_twin():
 
 
 @pytest.fixture
+def synth_and_build(tmp_path, run_twin):
+    """`twin synth -o SAMPLE ARGS...`, then `twin build` of it with its held-out recording, as the README runs
+    them; returns the OUT folder and its asset.json."""
+    def make(*synth_args: str) -> tuple[Path, dict]:
+        import json
+
+        sample, out = tmp_path / "sample", tmp_path / "out"
+        proc = run_twin("synth", "-o", str(sample), *synth_args)
+        assert proc.returncode == 0, proc.stderr
+        proc = run_twin("build", str(sample / "scan"), "--logs", str(sample / "trial.mcap"),
+                        "--holdout", str(sample / "heldout.mcap"), "-o", str(out))
+        assert proc.returncode == 0, proc.stderr
+        return out, json.loads((out / "asset.json").read_text())
+
+    return make
+
+
+@pytest.fixture
 def kinect_frames(shared_data, tmp_path):
     """Links the real 7-Scenes Kinect frames of the ids given, from ../shared/data, into a scan folder in
     7-Scenes' own layout, and returns the folder."""

@@ -134,20 +134,12 @@ def test_build_from_a_mesh_file(tmp_path, run_twin):
 
 @pytest.mark.parametrize(("effect", "frame"), [("viscous_damping", "gripper"), ("time_delay", "world"),
                                                ("sensor_bias", "gripper")])
-def test_a_build_that_finds_an_effect_replays_in_mujoco_as_newton_does(tmp_path, run_twin, effect, frame):
+def test_a_build_that_finds_an_effect_replays_in_mujoco_as_newton_does(synth_and_build, effect, frame):
     """A held cube with a concealed effect: the build keeps the refit with it and its exports replay the
     held-out recording in MuJoCo as Newton replays the fit, the recording's own effects taken off it and the
     object's applied where the MJCF cannot carry them (a free joint's damping is one value for six
     velocities). Without that they replayed at 15-41x; a delay also broke the report (its residual rows)."""
-    sample = tmp_path / "sample"
-    proc = run_twin("synth", "-o", str(sample), "--effect", effect, "--effect-magnitude", "6",
-                    "--wrench-frame", frame)
-    assert proc.returncode == 0, proc.stderr
-    out = tmp_path / "out"
-    proc = run_twin("build", str(sample / "scan"), "--logs", str(sample / "trial.mcap"),
-                    "--holdout", str(sample / "heldout.mcap"), "-o", str(out))
-    assert proc.returncode == 0, proc.stderr
-    asset = json.loads((out / "asset.json").read_text())
+    out, asset = synth_and_build("--effect", effect, "--effect-magnitude", "6", "--wrench-frame", frame)
     assert [e["name"] for e in asset["effects"]] == [effect]
     replay = asset["provenance"]["heldout_replay"]
     assert replay["mujoco_over_newton"] < 1.25

@@ -25,21 +25,11 @@ def test_missing_base_mesh_is_named(tmp_path: Path, capsys):
     assert f"twin: error: {missing}: base mesh not found" in capsys.readouterr().err
 
 
-def test_a_part_built_with_an_effect_reports_its_replay_like_for_like(tmp_path: Path, run_twin):
+def test_a_part_built_with_an_effect_reports_its_replay_like_for_like(synth_and_build):
     """A drawer with concealed damping: the build keeps the refit with it, and asset.json's fit and the Newton
     replay beside MuJoCo's are that refit replayed as the identification replays (its windows, measured
     starts), not the diagnosis's own 0.6 s smoothed windows; the MJCF carries the damping."""
-    import json
-
-    sample = tmp_path / "sample"
-    proc = run_twin("synth", "-o", str(sample), "--object", "drawer", "--effect", "viscous_damping",
-                    "--effect-magnitude", "6")
-    assert proc.returncode == 0, proc.stderr
-    out = tmp_path / "out"
-    proc = run_twin("build", str(sample / "scan"), "--logs", str(sample / "trial.mcap"),
-                    "--holdout", str(sample / "heldout.mcap"), "-o", str(out))
-    assert proc.returncode == 0, proc.stderr
-    asset = json.loads((out / "asset.json").read_text())
+    _, asset = synth_and_build("--object", "drawer", "--effect", "viscous_damping", "--effect-magnitude", "6")
     assert [e["name"] for e in asset["effects"]] == ["viscous_damping"]
     replay = asset["provenance"]["heldout_replay"]
     assert asset["fit"]["final"]["rmse_position_m"] == replay["newton"]["rmse_position_m"]
