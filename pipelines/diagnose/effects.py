@@ -99,7 +99,7 @@ def without_recording_effects(recording, effects):
     tracked frame's where its message turns with it, as `diagnose_held` reports it) and as it acted under a
     `time_delay` (`Recording.wrench_acted`). effects: (name, params) pairs; others are ignored.
     """
-    from scipy.spatial.transform import Rotation, Slerp
+    from scipy.spatial.transform import Rotation
 
     for name, params in effects:
         w = recording.wrench
@@ -110,8 +110,7 @@ def without_recording_effects(recording, effects):
         elif name == "sensor_bias" and not bias_in_tracked_axes(recording):
             recording = remove_bias(recording, params["force"], params["torque"])
         elif name == "sensor_bias":
-            p = recording.pose
-            R = Slerp(p.t_s, Rotation.from_quat(p.quat_xyzw))(np.clip(w.t_s, p.t_s[0], p.t_s[-1]))
+            R = Rotation.from_quat(recording.pose.interpolate(w.t_s)[1])
             recording = replace(recording, wrench=replace(w, force=w.force - R.apply(params["force"]),
                                                           torque=w.torque - R.apply(params["torque"])))
     return recording

@@ -26,7 +26,8 @@ from scipy.optimize import minimize_scalar
 
 from assets import Effect, FitMetrics, Inertial, Pose
 from pipelines.identify import (
-    DataTerm, FreeBodyRollout, IdentifyConfig, NewtonEulerRows, concat_windows, identify_posterior, make_windows,
+    DataTerm, FreeBodyRollout, IdentifyConfig, NewtonEulerRows, PosteriorResult, concat_windows, identify_posterior,
+    make_windows,
     nearest_physical_inertia, newton_euler_rows, object_frame_from_pi, predicts_better, recording_noise_levels,
     renoised, theta_from_physical,
 )
@@ -63,7 +64,7 @@ class Diagnosis:
     doubtful: tuple[str, ...] = ()
     """Parameters of the body a mismatch no candidate explains may have corrupted ("mass", "com", "inertia",
     "friction"): not to be published as measured without a flag (asset.json flags)."""
-    posterior: object = None
+    posterior: PosteriorResult | None = None
     """A held body's refit with the chosen effects, `inertial["after"]` as the build keeps it (`PosteriorResult`:
     its covariance and the `FLAT_INERTIAL` entries its prior, not the recordings, set); None without one."""
 

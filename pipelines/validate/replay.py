@@ -13,6 +13,15 @@ from exporters.names import joint_name, mjcf_name
 from .loaders import REST_S, mujoco_free_body, rotation_from_wxyz, settle
 
 
+def _free_body_state(model, data, body: int, qadr: int, vadr: int):
+    """A free body's rotation, COM arm from its origin [m], angular velocity [rad/s] and COM velocity [m/s],
+    world axes, from qpos and qvel: `mj_step` leaves xpos, xipos and xmat at the state before its integration."""
+    R = rotation_from_wxyz(data.qpos[qadr + 3:qadr + 7])
+    com_arm = R @ model.body_ipos[body]
+    spin = R @ data.qvel[vadr + 3:vadr + 6]  # a free joint's angular velocity is in body axes
+    return R, com_arm, spin, data.qvel[vadr:vadr + 3] + np.cross(spin, com_arm)
+
+
 def replay_jointed_mujoco(mjcf_path: Path, asset: Asset, recording, joint_fit, config=None) -> dict:
     # joint_fit: the JointFit asset.joint was written from (same axis, so the same q)
     """Windowed replay of `recording` in MuJoCo from the exported MJCF: the measured joint effort as
@@ -91,12 +100,8 @@ def replay_held_mujoco(mjcf_path: Path, asset: Asset, recording, X_tracked_body,
         data.qvel[vadr + 3:vadr + 6] = R_b.T @ omega  # and body-axes angular velocity
         mujoco.mj_forward(model, data)
         for step in range(w.step_count):
-            # qpos, not xpos: mj_step leaves the kinematics at the state before its integration
-            R, origin = rotation_from_wxyz(data.qpos[qadr + 3:qadr + 7]), data.qpos[qadr:qadr + 3]
-            com_arm = R @ model.body_ipos[body]
+            R, com_arm, spin, v_com = _free_body_state(model, data, body, qadr, vadr)
             force, torque = w.wrench[step, k, :3], w.wrench[step, k, 3:]
-            spin = R @ data.qvel[vadr + 3:vadr + 6]
-            v_com = data.qvel[vadr:vadr + 3] + np.cross(spin, com_arm)
             data.xfrc_applied[body, :3] = force - (b + c * np.linalg.norm(v_com)) * v_com
             data.xfrc_applied[body, 3:] = torque + np.cross(R @ tracked_in_body - com_arm, force) - b_angular * spin
             mujoco.mj_step(model, data)
@@ -210,12 +215,9 @@ def replay_pushed_model(model, body_name: str, planar, recording, window_s: floa
         data.qvel[vadr + 3:vadr + 6] = R.T @ np.array([0.0, 0.0, yaw_rate])  # and body-axes angular velocity
         mujoco.mj_forward(model, data)
         for step in range(w.step_count):
-            R = rotation_from_wxyz(data.qpos[qadr + 3:qadr + 7])
-            arm_com = R @ model.body_ipos[body]  # qpos, not xipos: see below
-            spin = R @ data.qvel[vadr + 3:vadr + 6]
-            v_com = data.qvel[vadr:vadr + 3] + np.cross(spin, arm_com)
+            _, com_arm, spin, v_com = _free_body_state(model, data, body, qadr, vadr)
             f = np.array([*(force[step, k] - b * v_com[:2]), 0.0])
-            arm = np.array([*(contact[step, k] - data.qpos[qadr:qadr + 2] - arm_com[:2]), 0.0])
+            arm = np.array([*(contact[step, k] - data.qpos[qadr:qadr + 2] - com_arm[:2]), 0.0])
             data.xfrc_applied[body] = np.r_[f, np.cross(arm, f) - [0.0, 0.0, b_angular * spin[2]]]
             mujoco.mj_step(model, data)
             if (step + 1) % w.substeps == 0:
