@@ -87,16 +87,22 @@ def make_cases(concealed: int, clean: int, seed: int) -> list[Case]:
     return cases
 
 
-def free_case_body(case: Case):
-    """(uniform-density prior, true body, placement, grasp) of a free case: a 4 cm, 20 g cube or a 5 cm, 50 g
-    sphere held at its top, its COM shifted by a concealed `nonuniform_density`."""
+def free_case_mesh(case: Case):
+    """(mass [kg], mesh at that density) of a free case: a 4 cm, 20 g cube or a 5 cm, 50 g sphere."""
     import trimesh
-
-    from assets import Inertial, Pose
 
     mass, mesh = ((0.02, trimesh.creation.box((0.04,) * 3)) if case.shape == "cube"
                   else (0.05, trimesh.creation.icosphere(subdivisions=3, radius=0.025)))
     mesh.density = mass / mesh.volume
+    return mass, mesh
+
+
+def free_case_body(case: Case):
+    """(uniform-density prior, true body, placement, grasp) of a free case (`free_case_mesh`) held at its top,
+    its COM shifted by a concealed `nonuniform_density`."""
+    from assets import Inertial, Pose
+
+    mass, mesh = free_case_mesh(case)
     uniform = Inertial(mass, (0.0, 0.0, 0.0), np.asarray(mesh.moment_inertia))
     truth = uniform
     if case.effect is not None and case.effect.name == "nonuniform_density":
