@@ -25,8 +25,8 @@ import numpy as np
 
 from benchmarks.diagnose_cases import (  # noqa: F401  (some re-exported)
     EFFECTS, FREE_OBJECTS, JOINT_EFFECTS, JOINT_OBJECTS, OOV_EFFECTS, Case, case_kind, concealed_effect,
-    concealed_joint_effect, determined_quantity, free_case_mesh, joint_effort_noise, make_cases, make_mujoco_cases, overlaps,
-    record_case, record_joint_case, record_mujoco_case, record_mujoco_joint_case, record_push_case,
+    concealed_joint_effect, determined_quantity, free_case_mesh, joint_effort_noise, make_cases, make_mujoco_cases,
+    overlaps, record_case, record_joint_case, record_mujoco_case, record_mujoco_joint_case, record_push_case,
     true_body, true_joint_model_fit, true_model_fit, true_state_range,
 )
 
