@@ -27,7 +27,7 @@ from benchmarks.diagnose_cases import (  # noqa: F401  (some re-exported)
     EFFECTS, FREE_OBJECTS, JOINT_EFFECTS, JOINT_OBJECTS, OOV_EFFECTS, Case, case_kind, concealed_effect,
     concealed_joint_effect, determined_quantity, free_case_mesh, joint_effort_noise, make_cases, make_mujoco_cases,
     overlaps, record_case, record_joint_case, record_mujoco_case, record_mujoco_joint_case, record_push_case,
-    true_body, true_joint_model_fit, true_model_fit, true_state_range,
+    true_body, true_joint_model_fit, true_model_fit, true_push_replays, true_state_range,
 )
 
 
@@ -76,7 +76,7 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
 
     kind = case_kind(case)
     mujoco = case.engine == "mujoco"
-    joint = refit = kept = None
+    joint = refit = kept = push_truth = None
     with tempfile.TemporaryDirectory() as tmp:
         if kind == "joint":
             record = record_mujoco_joint_case if mujoco else record_joint_case
@@ -90,7 +90,7 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
             # the support the build would choose (`identify_pushed`), which the diagnosis then keeps
             support = identify_pushed([trial], holdout, body, mu_prior, SlidingConfig(), supports=SUPPORTS).config
             diagnosis, refit = diagnose_pushed([trial], [holdout], body, mu_prior, support, config)
-            true_fit = None
+            true_fit, push_truth = None, true_push_replays(case, holdout, body, support.window_s)
         else:
             record = record_mujoco_case if mujoco else record_case
             trial, holdout, prior, X_tracked_body = record(case, Path(tmp), duration_s)
@@ -119,7 +119,7 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
            "rmse_true_m": None if true_fit is None else true_fit.rmse_position_m,
            "floor_m": diagnosis.noise_floor["rmse_position_m"] if diagnosis.noise_floor else None,
            "unexplained": [dict(u) for u in diagnosis.unexplained], "doubtful": list(diagnosis.doubtful),
-           "mass_pct": None, "com_mm": None, "determined_pct": None, "oov_overlap": None}
+           "mass_pct": None, "com_mm": None, "determined_pct": None, "oov_overlap": None, "push_truth": push_truth}
     # the body a build publishes (a PosteriorResult): the refit with the chosen effects, else the identification's
     after = kept.inertial if kind == "free" else diagnosis.inertial.get("after") if diagnosis.inertial else None
     if kind in ("free", "joint") and after is not None:
@@ -226,9 +226,17 @@ def _summary(rows: list[dict]) -> None:
     groups = {"where the true model replays the held-out recording better than the base fit":
               lambda r: r["rmse_true_m"] is not None and r["rmse_true_m"] < r["rmse_before_m"],
               "where it does not": lambda r: r["rmse_true_m"] is not None and r["rmse_true_m"] >= r["rmse_before_m"],
-              "no true model (pushes)": lambda r: r["rmse_true_m"] is None}
+              "pushes (their truth is MuJoCo's: below)": lambda r: r["rmse_true_m"] is None}
     print("  " + "; ".join(f"{label}: {sum(r['found'] == r['concealed'] for r in concealed if of(r))}/"
                            f"{sum(of(r) for r in concealed)}" for label, of in groups.items()))
+    pushes = [r for r in concealed if r["push_truth"] is not None]
+    if pushes:
+        told = [r for r in pushes if r["push_truth"]["tells"]]
+        print(f"  pushes the model that made them (MuJoCo) replays better with their effect than "
+              f"without: {len(told)}/{len(pushes)}; right in {sum(r['found'] == r['concealed'] for r in told)} of "
+              f"those (with / without, mm: " + ", ".join(
+                  f"{1e3 * r['push_truth']['with_m']:.3f} / {1e3 * r['push_truth']['without_m']:.3f}"
+                  for r in pushes) + ")")
     for kind in ("free", "joint", "push"):
         for name in sorted({r["concealed"] for r in concealed if r["kind"] == kind}):
             of = [r for r in concealed if r["concealed"] == name and r["kind"] == kind]

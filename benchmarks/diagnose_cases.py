@@ -352,6 +352,31 @@ def record_push_case(case: Case, directory: Path):
     return out[0], out[1], PlanarBody(PUSH_HALF_M, PUSH_MASS_KG, box_izz(PUSH_MASS_KG, PUSH_HALF_M)), 0.5
 
 
+def true_push_replays(case: Case, holdout, body, window_s: float) -> dict:
+    """The held-out push replayed in MuJoCo by the model that made it (`pushed_block_xml` without its
+    pusher, driven by the recorded force), with the concealed effect as a pushed asset carries it
+    (`pushed_effects`) and without: position RMSE [m] of each, and whether the effect replays it better: the
+    free and jointed rows' test of whether the held-out recording tells the effect (there the base fit is the
+    reference; a push's base fit is Newton's sliding model, another simulator than the truth)."""
+    import mujoco
+
+    from assets import Effect
+    from pipelines.synth.mujoco_push import PushContact, pushed_block_xml, push_settings
+    from pipelines.synth.push import PushConfig
+    from pipelines.validate import pushed_effects, replay_pushed_model
+
+    config = PushConfig(half_extents_m=PUSH_HALF_M, mass_kg=PUSH_MASS_KG, mu=0.3)
+    concealed = () if case.effect is None else (
+        Effect("viscous_damping", {"b": case.effect.params["b"], "b_angular": 0.0}, {})
+        if case.effect.name == "viscous_damping" else Effect("time_delay", dict(case.effect.params), {}),)
+    out = {}
+    for label, effects in (("with", pushed_effects(concealed)), ("without", None)):
+        model = mujoco.MjModel.from_xml_string(pushed_block_xml(config, push_settings(), PushContact(), pusher=False))
+        out[label] = replay_pushed_model(model, "block", body, holdout, window_s, effects=effects)
+    with_m, without_m = out["with"]["rmse_position_m"], out["without"]["rmse_position_m"]
+    return {"with_m": with_m, "without_m": without_m, "tells": bool(concealed) and with_m < without_m}
+
+
 def case_kind(case: Case) -> str:
     """"free", "joint" or "push"."""
     return "joint" if case.shape in JOINT_OBJECTS else "push" if case.shape == "block" else "free"

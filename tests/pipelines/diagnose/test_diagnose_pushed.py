@@ -132,3 +132,19 @@ def test_an_effect_only_one_support_model_needs_is_not_reported(tmp_path):
     assert any(f.startswith("time_delay predicted the held-out windows better with the support loaded as "
                             "'corners', but no better than viscous_damping with it loaded as 'uniform'")
                for f in diagnosis.findings)
+
+
+def test_the_model_that_made_a_push_tells_a_strong_damping_and_nothing_on_a_clean_one(tmp_path):
+    """`twin bench diagnose`'s test of whether a MuJoCo push's held-out recording can tell its concealed
+    effect: the model that made it replays the held-out push at a third of the error with a 3 N s/m damping
+    than without; on a clean push there is nothing to tell."""
+    from benchmarks.diagnose_cases import Case, record_push_case, true_push_replays
+    from pipelines.synth.held import ConcealedEffect
+
+    for effect, tells in ((ConcealedEffect("viscous_damping", {"b": 3.0}), True), (None, False)):
+        case = Case("block", effect, 9.0 if effect else 0.0, 11, "mujoco", "world")
+        _, holdout, body, _ = record_push_case(case, tmp_path)
+        truth = true_push_replays(case, holdout, body, SlidingConfig().window_s)
+        assert truth["tells"] is tells
+        if effect is not None:
+            assert truth["with_m"] < 0.4 * truth["without_m"]
