@@ -135,12 +135,12 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
             # the moments the kept body's posterior determines: its 95 % interval within 5 % (the cube's and
             # sphere's object axes are principal); the worst one's error, and whether each lies within 2 std
             moments, std = np.diag(after.inertia_matrix()), kept.std[4:7]
-            truth = np.diag(body.inertia_matrix())
+            true_moments = np.diag(body.inertia_matrix())
             determined = Z95 * std < 0.05 * np.abs(moments)
             row["moments_determined"] = int(determined.sum())
-            row["moments_pct"] = (float(np.max(np.abs(100 * (moments - truth) / truth)[determined]))
+            row["moments_pct"] = (float(np.max(np.abs(100 * (moments / true_moments - 1))[determined]))
                                   if determined.any() else None)
-            row["moments_covered"] = int(np.sum(np.abs(moments - truth) <= 2 * std))
+            row["moments_covered"] = int(np.sum(np.abs(moments - true_moments) <= 2 * std))
     elif kind == "push" and refit is not None:
         row["determined_pct"] = 100 * (float(refit.theta[0]) - 0.3) / 0.3  # mu
     if kind == "joint" and truth in OOV_EFFECTS:
