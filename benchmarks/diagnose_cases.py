@@ -369,10 +369,9 @@ def true_push_replays(case: Case, holdout, body, window_s: float) -> dict:
     concealed = () if case.effect is None else (
         Effect("viscous_damping", {"b": case.effect.params["b"], "b_angular": 0.0}, {})
         if case.effect.name == "viscous_damping" else Effect("time_delay", dict(case.effect.params), {}),)
-    out = {}
-    for label, effects in (("with", pushed_effects(concealed)), ("without", None)):
-        model = mujoco.MjModel.from_xml_string(pushed_block_xml(config, push_settings(), PushContact(), pusher=False))
-        out[label] = replay_pushed_model(model, "block", body, holdout, window_s, effects=effects)
+    model = mujoco.MjModel.from_xml_string(pushed_block_xml(config, push_settings(), PushContact(), pusher=False))
+    out = {label: replay_pushed_model(model, "block", body, holdout, window_s, effects=effects)
+           for label, effects in (("with", pushed_effects(concealed)), ("without", None))}
     with_m, without_m = out["with"]["rmse_position_m"], out["without"]["rmse_position_m"]
     return {"with_m": with_m, "without_m": without_m, "tells": bool(concealed) and with_m < without_m}
 

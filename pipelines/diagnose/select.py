@@ -27,9 +27,8 @@ from scipy.optimize import minimize_scalar
 from assets import Effect, FitMetrics, Inertial, Pose
 from pipelines.identify import (
     DataTerm, FreeBodyRollout, IdentifyConfig, NewtonEulerRows, PosteriorResult, concat_windows, identify_posterior,
-    make_windows,
-    nearest_physical_inertia, newton_euler_rows, object_frame_from_pi, predicts_better, recording_noise_levels,
-    renoised, theta_from_physical,
+    make_windows, nearest_physical_inertia, newton_euler_rows, object_frame_from_pi, predicts_better,
+    recording_noise_levels, renoised, theta_from_physical,
 )
 
 from .config import DiagnoseConfig
