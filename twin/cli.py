@@ -18,6 +18,7 @@ import tyro
 from pipelines.decompose import DecomposeConfig
 from pipelines.diagnose import DiagnoseConfig
 from pipelines.reconstruct.config import ReconstructConfig
+from twin.output import INTERRUPTED
 
 
 @dataclass(frozen=True)
@@ -366,14 +367,17 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
-_INTERRUPTED = threading.Event()
-
-
 def _interrupt(signum, frame) -> None:
     # SIGTERM unwinds like Ctrl-C, so every temporary folder is removed on the way out; the flag is for an
-    # interrupt that lands in a C extension's import, which Python turns into an ImportError
-    _INTERRUPTED.set()
+    # interrupt that lands in a C extension's import (Python turns it into an ImportError) or in a callback
+    # (Python prints it and goes on)
+    INTERRUPTED.set()
     raise KeyboardInterrupt
+
+
+def _quiet_swallowed_interrupt(unraisable) -> None:
+    if not INTERRUPTED.is_set():
+        sys.__unraisablehook__(unraisable)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -395,12 +399,15 @@ def main(argv: list[str] | None = None) -> int:
         {"build": Build, "diagnose": Diagnose, "inspect": Inspect, "synth": Synth, "bench": Bench}, args=argv)
     warnings.showwarning = _show_warning  # one line each, like the errors, not the file and line of the check
     in_main_thread = threading.current_thread() is threading.main_thread()
-    _INTERRUPTED.clear()
+    INTERRUPTED.clear()
     previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)} if in_main_thread else {}
+    previous_hook, sys.unraisablehook = sys.unraisablehook, _quiet_swallowed_interrupt
     try:
         _dispatch(command)
+        if INTERRUPTED.is_set():
+            raise KeyboardInterrupt
     except BaseException as exc:  # noqa: BLE001 - every way out is one line
-        if _INTERRUPTED.is_set() or isinstance(exc, KeyboardInterrupt):
+        if INTERRUPTED.is_set() or isinstance(exc, KeyboardInterrupt):
             print("twin: interrupted; outputs left as they were", file=sys.stderr)
             return 130
         if isinstance(exc, SystemExit) or os.environ.get("TWIN_DEBUG"):
@@ -412,6 +419,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"TWIN_DEBUG=1 shows where", file=sys.stderr)
         return 1
     finally:
+        sys.unraisablehook = previous_hook
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     return 0

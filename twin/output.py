@@ -15,6 +15,7 @@ import json
 import os
 import shutil
 import tempfile
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -22,6 +23,11 @@ MANIFEST = ".twin-output.json"
 MANIFEST_SCHEMA = "twin.output/1"
 _LEGACY_FILES = ("asset.json", "report.html", "meshes")
 """What an output written before the manifest existed holds besides its asset.json's `files`."""
+
+
+INTERRUPTED = threading.Event()
+"""Set by the command line's Ctrl-C/SIGTERM handler. Python only prints an interrupt raised inside a callback
+(a weak reference's, an import lock's), so the build may run on; this flag still keeps its output out."""
 
 
 class OutputError(ValueError):
@@ -104,6 +110,8 @@ def staged_output(out: Path, force: bool = False, replace_own: bool = True, made
     try:
         tmp.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the output should follow the user's umask
         yield tmp
+        if INTERRUPTED.is_set():
+            raise KeyboardInterrupt
         _swap_in(tmp, out, force, made_by)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

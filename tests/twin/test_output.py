@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from twin.output import MANIFEST, OutputError, check_output, staged_output, written_by_twin
+from twin.output import INTERRUPTED, MANIFEST, OutputError, check_output, staged_output, written_by_twin
 
 
 def _user_folder(root: Path) -> Path:
@@ -47,6 +47,20 @@ def test_force_writes_beside_the_users_files_and_the_manifest_lists_only_twins(t
     assert (out / "cube.urdf").read_text() == "new"
     owned = written_by_twin(out)
     assert "notes.txt" not in owned and "sub/data.csv" not in owned and "meshes/collision_001.obj" in owned
+
+
+def test_an_interrupt_python_swallowed_still_keeps_the_new_output_out(tmp_path):
+    out = tmp_path / "out"
+    with staged_output(out) as tmp:
+        _write_build(tmp, text="old")
+    INTERRUPTED.set()  # as the signal handler leaves it when its KeyboardInterrupt was raised in a callback
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with staged_output(out) as tmp:
+                _write_build(tmp, text="new")
+    finally:
+        INTERRUPTED.clear()
+    assert (out / "cube.urdf").read_text() == "old" and _siblings(tmp_path) == ["out"]
 
 
 def test_a_rebuild_replaces_twins_files_keeps_the_users_and_drops_stale_ones(tmp_path):
