@@ -67,3 +67,39 @@ def test_friction_by_position_and_direction_localised_in_state():
     directional = noise + 1.0 * (qd > 0)
     found = localise_joint_friction(q, qd, directional, stride=4, unit="m/s", q_unit="m")
     assert [u["where"]["qd"][0] >= 0 for u in found if "qd" in u["where"]] == [True]
+
+
+def test_a_gravity_moment_carried_over_reads_as_no_one_way_friction(tmp_path):
+    """A clean Newton-made oven door whose trial and held-out recording disagree on the gravity moment by 1.3 %
+    (the bench's seed 1068): the trial's fit leaves a torque of one sign along the held-out travel, which times the
+    direction of motion looks like friction higher one way. Tested with the model fitted to the held-out rows,
+    nothing is there; on a cabinet door, a friction twice the noise higher one way still is."""
+    from dataclasses import replace
+
+    from pipelines.diagnose.joint import friction_patterns
+    from pipelines.diagnose.residuals import localise_joint_friction
+    from pipelines.identify.jointed import JointedConfig, equation_of_motion_rows, joint_body
+
+    config = replace(JointedConfig(), window_s=DiagnoseConfig().joint_window_s)
+
+    def rows_of(shape):
+        trial, holdout, joint, placement, prior = record_joint_case(Case(shape, None, 0.0, 1068), tmp_path / shape)
+        body = joint_body(joint, placement, prior, config)
+        train, rows = (equation_of_motion_rows(r, joint, body, config) for r in (trial, holdout))
+        stride = int(rows["rate_hz"] / (2 * config.smoothing_hz))
+        own, *_ = np.linalg.lstsq(rows["columns"][::stride], rows["tau"][::stride], rcond=None)
+        return train, rows, stride, own, float(np.std(rows["tau"] - rows["columns"] @ own))
+
+    train, rows, stride, own, noise = rows_of("oven_door")
+    carried, *_ = np.linalg.lstsq(train["columns"][::stride], train["tau"][::stride], rcond=None)
+    assert abs(np.hypot(*carried[1:3]) / np.hypot(*own[1:3]) - 1) > 0.005
+    carried_over = localise_joint_friction(rows["q"], rows["qd"], (rows["tau"] - rows["columns"] @ carried) / noise,
+                                           stride=stride, unit="rad/s", q_unit="rad")
+    assert any("qd" in u["where"] for u in carried_over)
+    assert friction_patterns(rows, (), config, 1.0, noise, stride, "revolute") == ()
+
+    _, rows, stride, _, noise = rows_of("cabinet_door")
+    assert friction_patterns(rows, (), config, 1.0, noise, stride, "revolute") == ()
+    one_way = dict(rows, tau=rows["tau"] + 2 * noise * (rows["qd"] > 0))
+    found = friction_patterns(one_way, (), config, 1.0, noise, stride, "revolute")
+    assert [u["where"]["qd"][0] >= 0 for u in found if "qd" in u["where"]] == [True]
