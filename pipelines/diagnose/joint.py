@@ -118,6 +118,11 @@ def _spring_stands_for_friction(identified, names, state, q: np.ndarray) -> bool
     return params["k"] <= 0 or outside > span
 
 
+def _design(rows: dict, names: tuple, config: JointedConfig, stribeck_speed: float) -> np.ndarray:
+    """The base model's effort columns of `rows` (`equation_of_motion_rows`) and those of the effects `names`."""
+    return np.concatenate([rows["columns"]] + [joint_effect_columns(c, rows, config, stribeck_speed) for c in names], 1)
+
+
 def friction_patterns(rows: dict, names: tuple, config: JointedConfig, stribeck_speed: float, noise: float,
                       stride: int, joint_type: str) -> tuple[dict, ...]:
     """Friction-like mismatches localised in q or in the direction of motion (`localise_joint_friction`), holding
@@ -128,7 +133,7 @@ def friction_patterns(rows: dict, names: tuple, config: JointedConfig, stribeck_
     1 % (an oven door's trial and held-out recording disagree by that much) leaves a torque of one sign along
     the travel, which times the direction of motion reads as a friction that depends on the direction, 1.4x
     the noise on a clean door, in Newton's recordings as in MuJoCo's."""
-    X = np.concatenate([rows["columns"]] + [joint_effect_columns(c, rows, config, stribeck_speed) for c in names], 1)
+    X = _design(rows, names, config, stribeck_speed)
     coef, *_ = np.linalg.lstsq(X[::stride], rows["tau"][::stride], rcond=None)
     prismatic = joint_type == "prismatic"
     return tuple(u for u in localise_joint_friction(rows["q"], rows["qd"], (rows["tau"] - X @ coef) / noise,
@@ -262,9 +267,7 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
     def residual(names):
         """Effort residual [noise units] of the least-squares model with `names` on the evaluation rows."""
         coef, *_ = np.linalg.lstsq(_columns(lib, names), lib.y, rcond=None)
-        X = np.concatenate([eval_rows["columns"]] + [joint_effect_columns(c, eval_rows, jconfig, v_s) for c in names],
-                           1) / noise
-        return eval_rows["tau"] / noise - X @ coef
+        return eval_rows["tau"] / noise - _design(eval_rows, names, jconfig, v_s) / noise @ coef
 
     unit = "m/s" if joint.type == "prismatic" else "rad/s"
     analyse = lambda r: analyse_joint_residual(eval_rows["t_s"], eval_rows["q"], eval_rows["qd"],  # noqa: E731
