@@ -418,7 +418,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"twin: error: internal error ({type(exc).__name__}: {_one_line(exc)}); "
                   f"TWIN_DEBUG=1 shows where", file=sys.stderr)
         return 1
-    finally:
+    finally:  # main may be called again in the same process (tests, a notebook): nothing of this run stays set
+        INTERRUPTED.clear()
         sys.unraisablehook = previous_hook
         for sig, handler in previous.items():
             signal.signal(sig, handler)

@@ -43,3 +43,21 @@ def test_version():
     from twin.cli import main
 
     assert main(["--version"]) == 0
+
+
+def test_an_interrupt_python_only_printed_still_ends_the_run_as_interrupted(monkeypatch, capsys):
+    """A Ctrl-C raised inside a callback (an import lock's, a weak reference's) is printed by Python and the work
+    goes on; main still exits 130 with its one line, and the printed traceback is kept quiet."""
+    import twin.cli as cli
+
+    def swallowed(command):
+        try:
+            cli._interrupt(signal.SIGINT, None)
+        except KeyboardInterrupt as exc:  # what Python does with it inside a callback
+            sys.unraisablehook(type("Unraisable", (), {"exc_type": KeyboardInterrupt, "exc_value": exc,
+                                                       "exc_traceback": exc.__traceback__, "err_msg": None,
+                                                       "object": None})())
+
+    monkeypatch.setattr(cli, "_dispatch", swallowed)
+    assert cli.main(["inspect", str(SAMPLE / "trial.mcap")]) == 130
+    assert capsys.readouterr().err.splitlines() == ["twin: interrupted; outputs left as they were"]
