@@ -216,7 +216,7 @@ def _joint(c: _Checker, doc, kind: str) -> Joint | None:
     if doc is None:
         c.fail("joint", f"kind {kind!r} needs a joint")
     j = c.object("joint", doc, ("type", "axis", "origin", "lower", "upper"),
-                 ("damping", "stiffness", "spring_ref", "axis_std_rad", "origin_std_m"))
+                 ("damping", "stiffness", "spring_ref", "axis_std_rad", "origin_std_m", "friction_grip_s"))
     if j["type"] != kind:
         c.string("joint.type", j["type"], ("prismatic", "revolute"))
         c.fail("joint.type", f"{j['type']!r}, but kind is {kind!r}")
@@ -232,6 +232,8 @@ def _joint(c: _Checker, doc, kind: str) -> Joint | None:
         c.number("joint.axis_std_rad", j["axis_std_rad"], low=0.0, finite=False)
     if j.get("origin_std_m") is not None:
         c.array("joint.origin_std_m", j["origin_std_m"], (3,), low=0.0, finite=False)
+    if j.get("friction_grip_s") is not None:
+        c.number("joint.friction_grip_s", j["friction_grip_s"], low=0.0, strict=True)
     return Joint(**{**j, "axis": tuple(j["axis"]), "origin": tuple(j["origin"]),
                     **({"origin_std_m": tuple(j["origin_std_m"])} if j.get("origin_std_m") is not None else {})})
 

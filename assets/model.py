@@ -264,6 +264,9 @@ class Joint:
     """1-sigma angle of the axis direction's error, when estimated from motion [rad]."""
     origin_std_m: tuple[float, float, float] | None = None
     """1-sigma error of `origin` per world axis across the axis (revolute) [m]."""
+    friction_grip_s: float | None = None
+    """Time constant [s] with which the joint friction, within its bound, brings the joint to rest
+    (q'' = -q' / friction_grip_s); None: not measured, a simulator's own default applies."""
 
 
 @dataclass(frozen=True)

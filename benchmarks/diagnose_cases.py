@@ -200,7 +200,7 @@ def true_joint_model_fit(case: Case, holdout, joint, placement, window_s: float)
     if effect is not None:
         p = effect.params
         sign = float(np.sign(joint.axis @ np.asarray(obj.axis)))  # q found along the true axis or against it
-        values[body.base_count:] = ([p["b"]] if effect.name == "viscous_damping" else  # JOINT_EFFECT_PARAMS' order
+        values[body.base_count:-1] = ([p["b"]] if effect.name == "viscous_damping" else  # JOINT_EFFECT_PARAMS' order
                                     [p["k"], sign * p["k"] * p["q0"]] if effect.name == "spring" else
                                     [p["f_s"] - p["f_c"], p["v_s"]])
     _, q_sim, windows = replay_jointed(holdout, joint, placement, truth, body, values, config)

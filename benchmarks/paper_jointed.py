@@ -82,9 +82,10 @@ def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0, engine: str = "
                         here = Path(tmp) / f"{name}-{sim}-{seed}"
                         entry["mjcf_replay_ratio"] = (
                             mjcf_heldout_replay(here / "identified", obj, joint, result.inertial,
-                                                result.value("friction"), rec["heldout"])
+                                                result.value("friction"), rec["heldout"],
+                                                grip_s=result.friction_grip_s())
                             / mjcf_heldout_replay(here / "truth", obj, joint, obj.inertial(), obj.friction,
-                                                  rec["heldout"]))
+                                                  rec["heldout"], grip_s=truth_grip_s(sim, result.step_s)))
                         entry["selected"] = result.selected
                         entry["prior_mass_covered"] = bool(prior.lower[0] <= obj.mass_kg <= prior.upper[0])
                 found.append(entry)
@@ -94,10 +95,17 @@ def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0, engine: str = "
     return rows
 
 
-def mjcf_heldout_replay(directory: Path, obj, joint, inertial, friction: float, heldout, effects=()) -> float:
+def truth_grip_s(engine: str, step_s: float) -> float | None:
+    """The friction grip of the model that made the recordings: MuJoCo's own `frictionloss` (None: its
+    defaults), Newton's rigid one (gripping within the replay's step)."""
+    return None if engine == "mujoco" else step_s
+
+
+def mjcf_heldout_replay(directory: Path, obj, joint, inertial, friction: float, heldout, effects=(),
+                        grip_s: float | None = None) -> float:
     """RMSE [m] of the tracked frame when MuJoCo replays `heldout` (`replay_jointed_mujoco`, windows from
     measured states) with the MJCF twin exports for the part with this body and joint friction on `joint`,
-    and the asset's `effects` (assets.Effect)."""
+    the friction's grip `grip_s` (None: MuJoCo's default) and the asset's `effects` (assets.Effect)."""
     from assets import Asset, Estimate, Geometry, Joint, Material, Theta
     from exporters.mjcf import export_mjcf
     from pipelines.validate import replay_jointed_mujoco
@@ -109,7 +117,7 @@ def mjcf_heldout_replay(directory: Path, obj, joint, inertial, friction: float, 
                   Estimate(float(friction), 0.0))
     asset = Asset(obj.name, joint.type, obj.placement(), theta, Geometry("meshes/visual.obj", ("meshes/collision.obj",)),
                   Material("unknown", 1000.0, 0.5), Joint(joint.type, tuple(joint.axis), tuple(joint.origin), -10.0,
-                                                          10.0), effects=tuple(effects))
+                                                          10.0, friction_grip_s=grip_s), effects=tuple(effects))
     return replay_jointed_mujoco(export_mjcf(asset, directory), asset, heldout, joint)["rmse_position_m"]
 
 

@@ -37,6 +37,15 @@ identified mu:
   (F - mu m g) / m either way. These are scene options (MJCF has no per-body
   cone), so the object's own file keeps MuJoCo's defaults there.
 
+Joint friction. MuJoCo's `frictionloss` is a soft constraint: within its bound
+it drives the joint's acceleration towards -b q' (b = 2 / (dmax timeconst) from
+`solreffriction`) and lets 1 - d of the load through (d from `solimpfriction`,
+0.9 by default: a tenth). The identification measures how fast the friction
+grips, `joint.friction_grip_s` (q'' = -q' / grip), and no leak, so the joint
+gets `solreffriction="2 grip / 0.99 1"` and `solimpfriction="0.99 0.99 0.001
+0.5 2"`. MuJoCo raises a time constant below two time steps to two
+(a rigid grip at that step).
+
 Support contacts. MuJoCo's mesh-plane (and box-plane) collision carries a flat
 face at its corners, which resists turning about twice as much as an evenly
 loaded face. The sliding identification chooses between the two from the pushes
@@ -86,6 +95,8 @@ _ROLL_FRICTION = 0.0001
 CONTACT = {"condim": "3", "solref": "0.02 1", "solimp": "0.9 0.95 0.001 0.5 2"}
 """Contact attributes of every colliding geom (module docstring)."""
 
+FRICTION_IMPEDANCE = 0.99
+"""solimpfriction's impedance of a jointed part whose friction grip was measured (module docstring)."""
 SCENE_OPTIONS = {"timestep": "0.002", "gravity": "0 0 -9.81", "cone": "elliptic", "impratio": "10"}
 """scene.xml's `<option>`: step [s], gravity [m/s^2] and the friction cone (module docstring)."""
 
@@ -110,6 +121,14 @@ def _num(values) -> str:
 
 def _mesh_name(rel_path: str) -> str:
     return PurePosixPath(rel_path).stem
+
+
+def _friction_grip(grip_s: float | None) -> dict[str, str]:
+    """A joint's `solreffriction`/`solimpfriction` gripping as measured (module docstring); none unmeasured."""
+    if grip_s is None:
+        return {}
+    return {"solreffriction": _num((2 * grip_s / FRICTION_IMPEDANCE, 1.0)),
+            "solimpfriction": _num((FRICTION_IMPEDANCE, FRICTION_IMPEDANCE, 0.001, 0.5, 2.0))}
 
 
 def _friction(mu: float) -> dict[str, str]:
@@ -203,7 +222,7 @@ def export_mjcf(asset: Asset, out_dir: Path) -> Path:
             pos=_num(R.T @ (np.asarray(j.origin) - asset.placement.position)), axis=_num(R.T @ np.asarray(j.axis)),
             range=_num((j.lower, j.upper)), damping=repr(float(j.damping)),
             frictionloss=repr(float(asset.theta.friction.value)), stiffness=repr(float(j.stiffness)),
-            springref=repr(float(j.spring_ref)),
+            springref=repr(float(j.spring_ref)), **_friction_grip(j.friction_grip_s),
         )
     ET.SubElement(
         body,

@@ -94,7 +94,8 @@ def jointed_asset(p: Prepared) -> Identified:
     spring = found.get("spring", {"k": 0.0, "q0": 0.0})
     joint = Joint(fit.type, tuple(fit.axis), tuple(fit.origin), lower, upper,
                   damping=found.get("viscous_damping", {"b": 0.0})["b"], stiffness=spring["k"], spring_ref=spring["q0"],
-                  axis_std_rad=fit.axis_std_rad, origin_std_m=tuple(fit.origin_std_m))
+                  axis_std_rad=fit.axis_std_rad, origin_std_m=tuple(fit.origin_std_m),
+                  friction_grip_s=kept.friction_grip_s())
     theta = weighed_where_prior(jointed_theta(kept, prior, fit.type), config.mass_kg)
     held = identified.fits.get("holdout", {})
     if held:

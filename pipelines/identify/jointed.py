@@ -60,7 +60,12 @@ breakaway excess f_s - f_c [N or N m], and stribeck_speed v_s [m/s or rad/s]. Th
 rollout's passive-force vector follow `pipelines.sim.joint.JOINT_EFFECT_SIZE`."""
 POSITIVE_EFFECT_PARAMS = ("damping", "stiffness", "stribeck", "stribeck_speed")
 """Passive forces only: damping and stiffness dissipate or restore, breakaway friction exceeds sliding friction."""
-_EFFECT_SLOT = {"damping": 0, "stiffness": 1, "spring_force": 2, "stribeck": 3, "stribeck_speed": 4}
+_EFFECT_SLOT = {"damping": 0, "stiffness": 1, "spring_force": 2, "stribeck": 3, "stribeck_speed": 4, "friction_lag": 5}
+FRICTION_LAG = "friction_lag"
+"""The joint friction's grip lag tau_f [s] (`pipelines.sim.joint`), last of every fit's parameters, 0 (rigid) or
+more: the Newton fit finds it, least squares assumes a rigid grip."""
+LAG_STARTS_S = (0.004, 0.012)
+"""Grip lags [s] the Newton fit may start from, besides a rigid grip (MuJoCo's frictionloss: about 0.0095)."""
 STRIBECK_SPEEDS = np.geomspace(0.003, 0.3, 25)
 """Grid of v_s [m/s or rad/s] searched by the least-squares start (the model is linear in the rest)."""
 
@@ -120,6 +125,8 @@ class JointedIdentification:
     """Held-out replay: "t_s", "measured", "prior", "kept" q [m or rad], each [S, W] (None without a held-out)."""
     choice: str = ""
     """The estimate kept and why, in words."""
+    step_s: float = 0.0
+    """The rollout's step [s]: the friction grips with time constant friction_lag + step_s."""
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])
@@ -128,6 +135,10 @@ class JointedIdentification:
         """Standard error; inf where the curvature left it undetermined (a NaN would make asset.json unreadable)."""
         variance = float(self.covariance[self.names.index(name)][self.names.index(name)])
         return float(np.sqrt(max(variance, 0.0))) if np.isfinite(variance) else float("inf")
+
+    def friction_grip_s(self) -> float:
+        """Time constant [s] of the friction's grip, q'' = -q' / grip (`pipelines.sim.joint`)."""
+        return self.value(FRICTION_LAG) + self.step_s
 
     def provenance(self) -> dict:
         return {
@@ -295,6 +306,7 @@ class _BodyMap:
         if unknown:
             raise ValueError(f"{sorted(unknown)}: not joint effects ({', '.join(JOINT_EFFECT_PARAMS)})")
         self.names += tuple(n for e in JOINT_EFFECT_PARAMS if e in effects for n in JOINT_EFFECT_PARAMS[e])
+        self.names += (FRICTION_LAG,)
 
     def friction(self, p: np.ndarray) -> float:
         return float(p[self.names.index("friction")])
@@ -308,7 +320,7 @@ class _BodyMap:
         return out
 
     def prior_values(self, friction0: float) -> np.ndarray:
-        """The prior body with friction `friction0` and no passive effect."""
+        """The prior body with friction `friction0`, gripping rigidly, and no passive effect."""
         effects = [1.0 if n == "stribeck_speed" else 0.0 for n in self.names[self.base_count:]]
         if self.joint.type == "prismatic":
             return np.array([self.prior.mass, friction0, *effects])
@@ -399,7 +411,7 @@ def _least_squares(parts, joint: JointFit, body: _BodyMap, config: JointedConfig
                                                r["rate_hz"]) for r in rows])
         A, x = np.column_stack([A, d_vs]), np.append(x, v_s)
     cov = (residual @ residual) / max(1, len(b) - len(x)) * np.linalg.pinv(A.T @ A)
-    return x, cov
+    return np.append(x, 0.0), np.pad(cov, (0, 1))  # a rigid grip (FRICTION_LAG), assumed
 
 
 def joint_body(joint: JointFit, placement: Pose, prior: Inertial, config: JointedConfig = JointedConfig(),
@@ -428,6 +440,8 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
     W = windows.q.shape[1]
     P = len(body.names)
     scale = np.maximum(np.abs(x_ls), 1e-6)
+    lag = P - 1  # FRICTION_LAG: its steps are a share of the rollout's step, whatever the start
+    scale[lag] = windows.dt_s
     rollout = _Rollout(windows, 1 + 2 * (P + 2), joint, placement, prior, config.friction_smoothing)
     sigma_q = 1.0  # residuals in q units; the sandwich covariance needs no noise level
 
@@ -493,13 +507,20 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
                 start = p.copy()
                 start[i], start[j] = excess, v_s
                 starts.append(start)
+    # the grip lag has more than one local optimum (a MuJoCo oven door: 0 and 6 ms from different starts)
+    starts += [np.concatenate([start[:lag], [tau]]) for start in list(starts) for tau in LAG_STARTS_S]
     evaluated = [(start, *evaluate(start, dq0[0], dqd0[0])) for start in starts]
     p, r, J, Jq, Jqd = min(evaluated, key=lambda e: float(np.sum(e[1] ** 2)))
     loss = float(np.sum(r * r))
     history, lam, small = [loss], 1e-3, 0
     for _ in range(config.max_iterations):
         dp, ds, _ = solve(r, J, Jq, Jqd, lam)
+        if p[lag] <= 0 and dp[lag] < 0:  # a rigid grip that would tighten further: the lag stays at 0
+            held = J.copy()
+            held[lag] = 0.0
+            dp, ds, _ = solve(r, held, Jq, Jqd, lam)
         trial = (p + dp, dq0[0] + ds[:, 0], dqd0[0] + ds[:, 1])
+        trial[0][lag] = max(trial[0][lag], 0.0)
         if np.any(trial[0][positive] <= 0):
             lam *= 10
             continue
@@ -552,7 +573,7 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
         _, q_prior, w = replays["prior"]
         traces = {"t_s": w.t_s, "measured": w.q[1:], "prior": q_prior, "kept": replays[selected][1]}
     return JointedIdentification(body.names, p, covariance, least_squares, body.inertial(p), body.basis,
-                                 fits, tuple(history), selected, traces, choice)
+                                 fits, tuple(history), selected, traces, choice, windows.dt_s)
 
 
 def replay_jointed(recording, joint, placement, prior, body: _BodyMap, p, config: JointedConfig):

@@ -8,6 +8,10 @@ exp(-(v / v_s)^2), opposing the motion as F(v) tanh(v / eps). It is solved impli
 (`joint_friction`): explicit, eps would have to exceed dt F / M to stay stable and a part would creep at up to
 eps under any force below F. Solved implicitly, eps is a thousandth of the speeds a part moves at and a force
 below F holds the part, as real joints do and as MuJoCo's frictionloss (a soft constraint) does.
+
+The friction grips with a lag tau_f: within its bound F it brings q' to rest as q'' = -q' / (tau_f + dt), not
+within one step. tau_f = 0 is a rigid grip; MuJoCo's frictionloss at its default solref grips with about
+9.5 ms (q'' = -105 q'), and a real joint's pre-sliding compliance lets it give a little before it holds.
 """
 
 from __future__ import annotations
@@ -23,20 +27,21 @@ FRICTION_SMOOTHING = 1e-3
 """eps of the friction law F(v) tanh(v / eps) [m/s or rad/s]: a part under a force P below F creeps at
 eps atanh(P / F), at most a few millimetres per second."""
 
-JOINT_EFFECT_SIZE = 5
+JOINT_EFFECT_SIZE = 6
 """Passive joint forces beyond the Coulomb friction, per world: damping b [N s/m or N m s/rad], stiffness k
 [N/m or N m/rad], spring force k q0 [N or N m], Stribeck excess f_s - f_c [N or N m], Stribeck speed v_s
-[m/s or rad/s] (1 where there is no excess)."""
+[m/s or rad/s] (1 where there is no excess), the friction's grip lag tau_f [s] (0: rigid)."""
 
 
 @wp.func
-def joint_friction(free_qd: float, compliance: float, friction: float, excess: float, speed: float,
+def joint_friction(free_qd: float, grip_qd: float, compliance: float, friction: float, excess: float, speed: float,
                    smoothing: float) -> float:
-    """Joint friction [N or N m] over one step, -F(v) tanh(v / eps) at the speed v the step ends at:
-    v = free_qd - compliance F(v) tanh(v / eps).
+    """Joint friction [N or N m] over one step, -F(v) tanh((v - grip_qd) / eps) at the speed v the step ends at:
+    v = free_qd - compliance F(v) tanh((v - grip_qd) / eps).
 
-    free_qd: q' at the step's end without friction [m/s or rad/s]; compliance: dt / M, the change of q' per
-    unit force over the step. v - free_qd + compliance F(v) tanh(v / eps) rises through zero once between
+    free_qd: q' at the step's end without friction [m/s or rad/s]; grip_qd: the speed the friction holds the
+    step's end to while it grips (0 for a rigid grip, `passive_joint_force`); compliance: dt / M, the change of
+    q' per unit force over the step. The left side less the right rises through zero once between
     free_qd -/+ compliance (f_c + |f_s - f_c|); 40 halvings find it to float precision."""
     reach = compliance * (friction + wp.abs(excess))
     lo = free_qd - reach
@@ -44,27 +49,30 @@ def joint_friction(free_qd: float, compliance: float, friction: float, excess: f
     for _ in range(40):
         v = 0.5 * (lo + hi)
         x = v / speed
-        if v - free_qd + compliance * (friction + excess * wp.exp(-x * x)) * wp.tanh(v / smoothing) > 0.0:
+        if v - free_qd + compliance * (friction + excess * wp.exp(-x * x)) * wp.tanh((v - grip_qd) / smoothing) > 0.0:
             hi = v
         else:
             lo = v
     v = 0.5 * (lo + hi)
     x = v / speed
-    return -(friction + excess * wp.exp(-x * x)) * wp.tanh(v / smoothing)
+    return -(friction + excess * wp.exp(-x * x)) * wp.tanh((v - grip_qd) / smoothing)
 
 
 @wp.func
 def passive_joint_force(q: float, qd: float, effort: float, friction: float, effect: wp.array2d[float], w: int,
                         dynamics: wp.vec3, turns: float, dt: float, smoothing: float) -> float:
     """Damping, spring and joint friction [N or N m] of world w under the effort [N or N m] over a step of dt [s]:
-    -b q' - k q + k q0 + the friction that, with the effort and gravity, the step realizes (`joint_friction`).
+    -b q' - k q + k q0 + the friction that, with the effort and gravity, the step realizes (`joint_friction`),
+    gripping towards q' tau_f / (tau_f + dt) (q'' = -q' / (tau_f + dt); a rigid grip at tau_f = 0).
 
     dynamics: M [kg or kg m^2] and the gravity load L1 cos(turns q) + L2 sin(turns q) [N or N m] of
     `joint_dynamics` (turns 1 on a revolute joint, 0 on a prismatic one)."""
     elastic = -effect[w, 0] * qd - effect[w, 1] * q + effect[w, 2]
     load = dynamics[1] * wp.cos(turns * q) + dynamics[2] * wp.sin(turns * q)
     free_qd = qd + dt * (effort + elastic + load) / dynamics[0]
-    return elastic + joint_friction(free_qd, dt / dynamics[0], friction, effect[w, 3], effect[w, 4], smoothing)
+    grip_qd = qd * effect[w, 5] / (effect[w, 5] + dt)
+    return elastic + joint_friction(free_qd, grip_qd, dt / dynamics[0], friction, effect[w, 3], effect[w, 4],
+                                    smoothing)
 
 
 @wp.kernel

@@ -34,7 +34,7 @@ def test_drawer_mass_and_friction_from_a_recording(tmp_path: Path):
     prior = uniform_density_prior(obj.mesh(), material_range(None)).inertial
     prior = type(prior)(0.7 * obj.mass_kg, prior.com, prior.inertia)
     result = identify_jointed([recording], joint, obj.placement(), prior)
-    assert result.names == ("mass", "friction") and result.selected == "newton"
+    assert result.names == ("mass", "friction", "friction_lag") and result.selected == "newton"
     assert result.value("mass") == pytest.approx(obj.mass_kg, rel=0.03)
     assert result.value("friction") == pytest.approx(obj.friction, rel=0.05)
     assert 0 < result.std("mass") < 0.01 * obj.mass_kg
@@ -50,7 +50,7 @@ def test_cabinet_door_inertia_about_its_axis(tmp_path: Path):
     prior = uniform_density_prior(obj.mesh(), material_range(None)).inertial
     result = identify_jointed([recording], joint, obj.placement(), prior)
     truth = jointed_truth(obj)
-    assert result.names == ("axis_inertia", "friction")
+    assert result.names == ("axis_inertia", "friction", "friction_lag")
     assert result.value("axis_inertia") == pytest.approx(truth["axis_inertia"], rel=0.05)
     assert result.value("friction") == pytest.approx(obj.friction, rel=0.05)
     assert result.inertial.mass == prior.mass
@@ -86,3 +86,20 @@ def test_mujoco_drawer_mass_and_friction(tmp_path: Path):
     result = identify_jointed([recording], joint, obj.placement(), prior)
     assert abs(result.value("mass") / obj.mass_kg - 1) < 0.03
     assert abs(result.value("friction") / obj.friction - 1) < 0.05
+
+
+def test_mujoco_frictions_grip_lag_is_measured_and_newtons_rigid_grip_kept(tmp_path: Path):
+    """MuJoCo's frictionloss grips with a lag (q'' = -105 q' at its default solref: 9.5 ms); fitted with it, a MuJoCo
+    oven door's inertia about the hinge comes back within 3 % (3-4.5 % high with a rigid grip). The grip found
+    holds the truth within 2.5 standard errors on MuJoCo's soft friction and on Newton's rigid one."""
+    from pipelines.synth.mujoco_engine import simulate_jointed_mujoco
+
+    obj = jointed_paper_objects()["oven_door"]
+    prior = uniform_density_prior(obj.mesh(), material_range(None)).inertial
+    for simulate, grip_s in ((simulate_jointed_mujoco, 1 / 105.3), (simulate_jointed, None)):
+        rng = np.random.default_rng(4)
+        motion = simulate(obj, JointedMotionConfig(duration_s=8.0), rng)
+        recording = read_recording(write_jointed_recording(tmp_path / "door.mcap", obj, motion, SensorNoise(), rng))
+        result = identify_jointed([recording], detect_kind(recording).joint, obj.placement(), prior)
+        assert result.value("axis_inertia") == pytest.approx(jointed_truth(obj)["axis_inertia"], rel=0.03)
+        assert abs(result.friction_grip_s() - (grip_s or result.step_s)) < 2.5 * result.std("friction_lag")
