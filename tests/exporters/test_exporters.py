@@ -231,6 +231,19 @@ def test_joint_damping_and_spring_reach_every_format(asset: Asset, tmp_path: Pat
     assert prim.GetAttribute("mjc:springref").Get() == pytest.approx(0.2 / per_unit)
 
 
+def test_a_measured_friction_grip_reaches_mujoco(asset: Asset, tmp_path: Path):
+    """MuJoCo's frictionloss drives q'' towards -2 q' / (dmax timeconst) while it holds: a measured grip of 10 ms
+    gives that rate and leaks 1 %; an unmeasured grip leaves MuJoCo's defaults."""
+    import mujoco
+
+    for grip_s, solref, solimp in ((0.01, (2 * 0.01 / 0.99, 1.0), (0.99, 0.99)), (None, (0.02, 1.0), (0.9, 0.95))):
+        joint = Joint("prismatic", (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), -0.1, 0.3, friction_grip_s=grip_s)
+        model = mujoco.MjModel.from_xml_path(str(export_mjcf(replace(asset, kind="prismatic", joint=joint), tmp_path)))
+        assert model.dof_solref[0] == pytest.approx(solref)
+        assert model.dof_solimp[0][:2] == pytest.approx(solimp)
+        assert 2 / (model.dof_solimp[0][1] * model.dof_solref[0][0]) == pytest.approx(1 / (grip_s or 0.0095), rel=1e-3)
+
+
 def test_empty_joint_range_is_refused(asset: Asset, tmp_path: Path):
     """A joint whose lower limit is not below its upper one is refused by every writer, naming the range."""
     drawer = replace(asset, kind="prismatic", joint=Joint("prismatic", (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3, 0.3))
