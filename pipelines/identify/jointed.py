@@ -87,6 +87,8 @@ class JointedConfig:
     """Low-pass of q for start states and the least-squares start [Hz]."""
     hold_speed: float = 1e-3
     """Windows start once the joint has moved: |q'| above this [m/s] or [rad/s] somewhere before."""
+    fit_grip: bool = True
+    """Fit the friction's grip lag (`FRICTION_LAG`) after the body; otherwise the friction grips rigidly."""
 
 
 @dataclass(frozen=True)
@@ -418,12 +420,13 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
     # from a rigid grip and from a lag and keeps the lesser loss.
     p, r, J, Jq, Jqd = descend(p, r, J, Jq, Jqd, lag_free=False)
     rigid_fit, rigid_starts, ends = (p, r, J, Jq, Jqd), (dq0[0].copy(), dqd0[0].copy()), []
-    for tau in (0.0, *LAG_STARTS_S):
+    for tau in (0.0, *LAG_STARTS_S) if config.fit_grip else ():
         dq0[0], dqd0[0] = rigid_starts
         start = np.concatenate([p[:lag], [tau]])
         ends.append((descend(*((start, *evaluate(start, dq0[0], dqd0[0])) if tau else rigid_fit), lag_free=True),
                      dq0[0].copy(), dqd0[0].copy()))
-    (p, r, J, Jq, Jqd), dq0[0], dqd0[0] = min(ends, key=lambda e: float(np.sum(e[0][1] ** 2)))
+    (p, r, J, Jq, Jqd), dq0[0], dqd0[0] = min(ends or [(rigid_fit, *rigid_starts)],
+                                              key=lambda e: float(np.sum(e[0][1] ** 2)))
 
     # window-clustered sandwich: the bread with start offsets eliminated, the meat from per-window scores
     _, _, A_s = solve(r, J, Jq, Jqd, 0.0)
