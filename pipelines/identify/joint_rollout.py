@@ -42,6 +42,8 @@ def joint_effort(recording, joint: JointFit) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class JointWindows:
+    """Back-to-back shooting windows of one or more recordings (`joint_windows`)."""
+
     dt_s: float
     substeps: int
     q: np.ndarray          # [S+1, W] measured q at samples
@@ -77,16 +79,16 @@ def joint_windows(recording, joint: JointFit, config: JointedConfig) -> JointWin
     t_step = grid[starts][None, :] + dt * np.arange(steps)[:, None]
     idx = np.clip(np.searchsorted(t_wrench, t_step + 1e-9, side="right") - 1, 0, len(t_wrench) - 1)
     sample_idx = starts[None, :] + np.arange(samples + 1)[:, None]
-    return JointWindows(dt, config.substeps, qg[sample_idx], qs[sample_idx], grid[sample_idx[1:]], qs[starts], qds[starts],
-                    tau[idx])
+    return JointWindows(dt, config.substeps, qg[sample_idx], qs[sample_idx], grid[sample_idx[1:]], qs[starts],
+                        qds[starts], tau[idx])
 
 
 def concat_windows(parts: list[JointWindows]) -> JointWindows:
     return JointWindows(parts[0].dt_s, parts[0].substeps, np.concatenate([p.q for p in parts], 1),
-                    np.concatenate([p.q_smoothed for p in parts], 1),
-                    np.concatenate([p.t_s for p in parts], 1),
-                    np.concatenate([p.q_start for p in parts]), np.concatenate([p.qd_start for p in parts]),
-                    np.concatenate([p.effort for p in parts], 1))
+                        np.concatenate([p.q_smoothed for p in parts], 1),
+                        np.concatenate([p.t_s for p in parts], 1),
+                        np.concatenate([p.q_start for p in parts]), np.concatenate([p.qd_start for p in parts]),
+                        np.concatenate([p.effort for p in parts], 1))
 
 
 class JointRollout:

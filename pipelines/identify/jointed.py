@@ -53,10 +53,10 @@ breakaway excess f_s - f_c [N or N m], and stribeck_speed v_s [m/s or rad/s]. Th
 rollout's passive-force vector follow `pipelines.sim.joint.JOINT_EFFECT_SIZE`."""
 POSITIVE_EFFECT_PARAMS = ("damping", "stiffness", "stribeck", "stribeck_speed")
 """Passive forces only: damping and stiffness dissipate or restore, breakaway friction exceeds sliding friction."""
-_EFFECT_SLOT = {"damping": 0, "stiffness": 1, "spring_force": 2, "stribeck": 3, "stribeck_speed": 4, "friction_lag": 5}
 FRICTION_LAG = "friction_lag"
 """The joint friction's grip lag tau_f [s] (`pipelines.sim.joint`), last of every fit's parameters, 0 (rigid) or
 more: the Newton fit finds it, least squares assumes a rigid grip."""
+_EFFECT_SLOT = {"damping": 0, "stiffness": 1, "spring_force": 2, "stribeck": 3, "stribeck_speed": 4, FRICTION_LAG: 5}
 LAG_STARTS_S = (0.008,)
 """Grip lags [s] the Newton fit also descends from, besides a rigid grip (MuJoCo's frictionloss: about 0.0095)."""
 STRIBECK_SPEEDS = np.geomspace(0.003, 0.3, 25)
