@@ -61,10 +61,12 @@ def _write(engine: str, path: Path, push, wrench_frame: str = "world"):
 
 
 def _identify_modes(engine: str, seed: int, tmp: Path, prior_mass_factor: float, mu_prior: float) -> list[dict]:
-    """The identification alone, three ways ("m known", "m free", "slow"; bench_push)."""
+    """The identification alone, three ways ("m known", "m free", "slow"; bench_push), as a build without a
+    held-out push: on the support model `choose_support` keeps from the trial's halves with the mass known, mu
+    as `measured_friction` reports it (the sliding fit, else the wrench balance; "bound": neither measured it)."""
     from pipelines.identify.sliding import (
-        PlanarBody, SlidingConfig, estimate_force_bias, identify_sliding, push_windows, quasi_static_friction,
-        wrench_balance_friction,
+        PlanarBody, SlidingConfig, choose_support, estimate_force_bias, identify_sliding, measured_friction,
+        push_windows, quasi_static_friction, wrench_balance_friction,
     )
     from pipelines.logs import read_recording
 
@@ -75,6 +77,11 @@ def _identify_modes(engine: str, seed: int, tmp: Path, prior_mass_factor: float,
         path = tmp / f"push_{engine}_{seed}_{name}.mcap"
         truth = _write(engine, path, variant)
         recordings[name] = read_recording(path)
+    known = PlanarBody(push.half_extents_m, truth.mass_kg, box_izz(truth.mass_kg, push.half_extents_m))
+    strokes = recordings["strokes"]
+    found = choose_support(push_windows(strokes, known, config, estimate_force_bias(strokes, config)), None,
+                           known, mu_prior, config)
+    config = replace(config, support=found[0].support if found else config.support)
     rows = []
     for mode, mass, free, rec in (
             ("m known", truth.mass_kg, (True, False, True), recordings["strokes"]),
@@ -86,10 +93,11 @@ def _identify_modes(engine: str, seed: int, tmp: Path, prior_mass_factor: float,
         windows = push_windows(rec, body, config, bias)
         fit = identify_sliding(windows, body, config, mu_prior=mu_prior, free=free)
         balance = wrench_balance_friction(windows, body, config)
+        mu, _, by = measured_friction(fit, balance) or (float(fit.theta[0]), 0.0, "bound")
         rows.append({
-            "engine": engine, "seed": seed, "mode": mode, "mu_true": truth.mu, "mu": float(fit.theta[0]),
-            "mu_err_pct": 100 * (fit.theta[0] / truth.mu - 1),
-            "mu_m_err_pct": 100 * (fit.theta[0] * fit.theta[1] / (truth.mu * truth.mass_kg) - 1),
+            "engine": engine, "seed": seed, "mode": mode, "support": config.support, "by": by,
+            "mu_true": truth.mu, "mu": mu, "mu_err_pct": 100 * (mu / truth.mu - 1),
+            "mu_m_err_pct": 100 * (mu * fit.theta[1] / (truth.mu * truth.mass_kg) - 1),
             "mass_err_pct": 100 * (fit.theta[1] / truth.mass_kg - 1),
             "izz_err_pct": 100 * (fit.theta[2] / truth.izz_kgm2 - 1),
             "determined": fit.determined, "turn_deg": net_yaw_deg(rec), "windows": fit.window_count,
@@ -183,7 +191,8 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
     in the MIT dataset); "m free" fits mu, m and I_zz from a mass prior
     `prior_mass_factor` x the truth (what pushes alone can tell); "slow" is "m known" on a second
     recording of the same block pushed in one continuous stroke at 30 mm/s, where the quasi-static wrench
-    balance ("wb") applies (the strokes of the others stop the block within most windows).
+    balance ("wb") applies (the strokes of the others stop the block within most windows). Each on the support
+    model and with mu as a build without a held-out push has them (`_identify_modes`).
 
     Build: `build_and_replay` (the user's `twin build` with a held-out push and the weighed mass): the
     friction it reports, the effects its diagnosis reports on these clean pushes, and the exported scene's
@@ -212,16 +221,17 @@ def bench_push(seeds: int = 5, prior_mass_factor: float = 1.2, mu_prior: float =
 
 def _print_identification(rows, engines, seeds, prior_mass_factor, mu_prior) -> None:
     print(f"identification alone: prior mu = {mu_prior}; 'm free' starts from a mass prior = truth x "
-          f"{prior_mass_factor}; 'data' marks the parameters (mu, m, Izz) the pushes determined")
+          f"{prior_mass_factor}; 'data' marks the parameters (mu, m, Izz) the pushes determined; support: the "
+          f"model chosen from the trial's halves with the mass known")
     print(f"{'engine':6} {'seed':>4} {'mode':7} {'mu true':>7} {'mu':>6} {'mu err %':>8} {'mu*m err %':>10} "
           f"{'m err %':>7} {'Izz err %':>9} {'data':>4} {'turn deg':>8} {'win':>3} {'mu qs':>6} {'bias err N':>10} "
-          f"{'rmse mm':>7} {'wb err %':>8} {'st':>3} {'s':>5}")
+          f"{'rmse mm':>7} {'wb err %':>8} {'st':>3} {'s':>5} support mu by")
     for r in rows:
         flags = "".join("y" if d else "n" for d in r["determined"])
         print(f"{r['engine']:6} {r['seed']:4d} {r['mode']:7} {r['mu_true']:7.3f} {r['mu']:6.3f} "
               f"{r['mu_err_pct']:+8.2f} {r['mu_m_err_pct']:+10.2f} {r['mass_err_pct']:+7.2f} {r['izz_err_pct']:+9.2f} "
               f"{flags:>4} {r['turn_deg']:8.1f} {r['windows']:3d} {r['mu_qs_true_mass']:6.3f} {r['bias_err_n']:10.3f} "
-              f"{r['rmse_mm']:7.3f} {r['mu_wb_err_pct']:+8.2f} {r['wb_windows']:3d} {r['seconds']:5.1f}")
+              f"{r['rmse_mm']:7.3f} {r['mu_wb_err_pct']:+8.2f} {r['wb_windows']:3d} {r['seconds']:5.1f} {r['support']} {r['by']}")
     print("wb: the quasi-static wrench balance over its 'st' steady windows (none: the strokes stop the block)")
     for engine in engines:
         for mode in ("m known", "m free", "slow"):

@@ -36,6 +36,10 @@ identified mu:
   advice for elliptic cones) 0.04 mm, with sliding acceleration within 0.5 % of
   (F - mu m g) / m either way. These are scene options (MJCF has no per-body
   cone), so the object's own file keeps MuJoCo's defaults there.
+- scene.xml's `<option timestep="0.001">`: half MuJoCo's default. A sliding
+  block's path is steep in its contact's discretisation: the held-out pushes of
+  `twin bench push` replayed at 2 ms differ from their replay at 0.5 ms by up to
+  21 % of the error, at 1 ms by up to 8 % (docs/pushes.md).
 
 Joint friction. MuJoCo's `frictionloss` is a soft constraint: within its bound
 it drives the joint's acceleration towards -b q' (b = 2 / (dmax timeconst) from
@@ -97,7 +101,7 @@ CONTACT = {"condim": "3", "solref": "0.02 1", "solimp": "0.9 0.95 0.001 0.5 2"}
 
 FRICTION_IMPEDANCE = 0.99
 """solimpfriction's impedance of a jointed part whose friction grip was measured (module docstring)."""
-SCENE_OPTIONS = {"timestep": "0.002", "gravity": "0 0 -9.81", "cone": "elliptic", "impratio": "10"}
+SCENE_OPTIONS = {"timestep": "0.001", "gravity": "0 0 -9.81", "cone": "elliptic", "impratio": "10"}
 """scene.xml's `<option>`: step [s], gravity [m/s^2] and the friction cone (module docstring)."""
 
 
@@ -279,7 +283,7 @@ def export_scene(asset: Asset, out_dir: Path, mjcf_path: Path) -> Path:
 
     The plane's top is at `support_height_m` (world z [m]), under the object's placement; it carries
     the identified friction `asset.theta.friction.value` with the object's contact attributes, so MuJoCo
-    takes mu for the pair. Options: `SCENE_OPTIONS` (gravity -9.81 m/s^2 along world z, 2 ms step,
+    takes mu for the pair. Options: `SCENE_OPTIONS` (gravity -9.81 m/s^2 along world z, 1 ms step,
     elliptic cone, impratio 10).
     """
     out_dir = Path(out_dir)
