@@ -128,6 +128,8 @@ def replay_pushed(p: Prepared, scene_path, asset, recording, window_s, sconfig) 
     recording's pushes in MuJoCo, on the windows Newton's replay of the fit used."""
     mujoco = p.timer.run("replay (MuJoCo)", replay_pushed_mujoco, scene_path, asset, recording, window_s, sconfig)
     newton = asset.fit.final.rmse_position_m
+    floor = mujoco["noise_floor_m"]
     p.log(f"replay of {Path(recording.path).name}: MuJoCo {1000 * mujoco['rmse_position_m']:.3f} mm, "
-          f"Newton {1000 * newton:.3f} mm")
-    return {"recording": str(recording.path), "mujoco": mujoco, "newton": {"rmse_position_m": newton}}
+          f"Newton {1000 * newton:.3f} mm, the tracker's noise alone {1000 * floor:.3f} mm")
+    return {"recording": str(recording.path), "mujoco": mujoco, "newton": {"rmse_position_m": newton},
+            "noise_floor_m": floor, "mujoco_over_noise_floor": mujoco["rmse_position_m"] / floor if floor else None}

@@ -135,8 +135,9 @@ def replay_pushed_mujoco(scene_path: Path, asset: Asset, recording, window_s: fl
 
     Returns SI values: "rmse_position_m" and "rmse_heading_rad" over every pose sample of every window
     (as asset.json → fit), "rmse_final_position_m" and "rmse_final_heading_rad" over the windows' last
-    samples, per window "t_start_s", "final_position_error_m" and "final_heading_error_rad", and
-    "windows", "window_s", "timestep_s".
+    samples, per window "t_start_s", "final_position_error_m" and "final_heading_error_rad",
+    "windows", "window_s", "timestep_s", and "noise_floor_m", what the tracker's noise alone puts into
+    rmse_position_m (`tracker_scatter_m`): no model's replay can go below it.
     """
     import mujoco
     import trimesh
@@ -233,4 +234,15 @@ def replay_pushed_model(model, body_name: str, planar, recording, window_s: floa
             "rmse_final_position_m": rms(position[-1]), "rmse_final_heading_rad": rms(heading[-1]),
             "t_start_s": w.t_start_s.tolist(), "final_position_error_m": position[-1].tolist(),
             "final_heading_error_rad": np.abs(heading[-1]).tolist(),
-            "windows": int(W), "window_s": float(w.span_s), "timestep_s": float(w.dt_s)}
+            "windows": int(W), "window_s": float(w.span_s), "timestep_s": float(w.dt_s),
+            "noise_floor_m": tracker_scatter_m(measured[..., :2])}
+
+
+def tracker_scatter_m(track: np.ndarray) -> float:
+    """What the tracker's own noise alone puts into a replay's position RMSE [m]: track [S, W, 2], x and y
+    per window sample. Each axis's noise is read from its second differences within the windows (white noise
+    of sigma gives 6 sigma^2), robustly (the median absolute deviation), so the few samples where a push
+    starts or stops do not count as noise; returns sqrt(sigma_x^2 + sigma_y^2), the RMS of a 2-D error."""
+    d2 = (track[2:] - 2 * track[1:-1] + track[:-2]).reshape(-1, track.shape[-1])
+    sigma = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
+    return float(np.sqrt(np.sum(sigma**2)))

@@ -44,6 +44,10 @@ def test_build_sliding_measures_friction_and_marks_the_mass_prior(tmp_path, run_
     assert asset["provenance"]["identify"]["config"]["support"] == "uniform"
     assert (out / asset["files"]["mjcf"]).read_text().count("_support_point_") == 16
     assert "diagnose" not in asset["provenance"]
+    # the exported scene's replay beside the tracker's noise alone (sigma per axis: sqrt(2) sigma in the plane)
+    replay = asset["provenance"]["heldout_replay"]
+    assert replay["noise_floor_m"] == pytest.approx(2 ** 0.5 * config.position_noise_m, rel=0.15)
+    assert replay["mujoco_over_noise_floor"] > 1.0
 
     # `twin diagnose` on the built asset reads the recording with the build's options and support, rewrites
     # asset.json, and (each half of the push fitted on the other) finds nothing in a clean push

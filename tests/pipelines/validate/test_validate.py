@@ -150,3 +150,20 @@ def test_a_joint_breakaway_the_mjcf_cannot_carry_acts_in_the_mujoco_replay(tmp_p
                                          recordings["heldout"], effects)
               for label, effects in (("coulomb", ()), ("stribeck", (Effect("stribeck_friction", params),)))}
     assert errors["stribeck"] < 0.8 * errors["coulomb"]
+
+
+def test_the_tracker_noise_floor_of_a_push_replay_is_its_noise_and_not_its_stops():
+    """Windows of a block that slides at 0.1 m/s and stops dead mid-window: with white tracker noise of sigma
+    per axis, the floor is sqrt(2) sigma (the RMS of a 2-D error) within 10 %; without noise, the stops alone
+    give almost none."""
+    from pipelines.validate.replay import tracker_scatter_m
+
+    rng = np.random.default_rng(0)
+    samples, windows, period, sigma = 51, 8, 0.01, 2e-4
+    t = period * np.arange(samples)[:, None]
+    stop = rng.uniform(0.1, 0.4, windows)[None, :]
+    travel = 0.1 * np.minimum(t, stop)
+    track = np.stack([travel * 0.6, travel * 0.8], axis=-1)
+    assert tracker_scatter_m(track) < 0.1 * sigma
+    noisy = track + rng.normal(0.0, sigma, track.shape)
+    assert tracker_scatter_m(noisy) == pytest.approx(np.sqrt(2) * sigma, rel=0.1)
