@@ -242,7 +242,10 @@ def tracker_scatter_m(track: np.ndarray) -> float:
     """What the tracker's own noise alone puts into a replay's position RMSE [m]: track [S, W, 2], x and y
     per window sample. Each axis's noise is read from its second differences within the windows (white noise
     of sigma gives 6 sigma^2), robustly (the median absolute deviation), so the few samples where a push
-    starts or stops do not count as noise; returns sqrt(sigma_x^2 + sigma_y^2), the RMS of a 2-D error."""
+    starts or stops do not count as noise; returns sqrt(sigma_x^2 + sigma_y^2), the RMS of a 2-D error (0 for
+    windows of under three samples, which cannot tell noise from motion)."""
+    if len(track) < 3:
+        return 0.0
     d2 = (track[2:] - 2 * track[1:-1] + track[:-2]).reshape(-1, track.shape[-1])
     sigma = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
     return float(np.sqrt(np.sum(sigma**2)))
