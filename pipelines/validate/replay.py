@@ -246,6 +246,8 @@ def tracker_scatter_m(track: np.ndarray) -> float:
     windows of under three samples, which cannot tell noise from motion)."""
     if len(track) < 3:
         return 0.0
+    from scipy.stats import median_abs_deviation
+
     d2 = (track[2:] - 2 * track[1:-1] + track[:-2]).reshape(-1, track.shape[-1])
-    sigma = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
+    sigma = median_abs_deviation(d2, axis=0, scale="normal") / np.sqrt(6)
     return float(np.sqrt(np.sum(sigma**2)))
