@@ -125,6 +125,58 @@ def _true_pi(truth, grasp) -> np.ndarray:
     return np.array([truth.mass, *(truth.mass * c), I_o[0, 0], I_o[1, 1], I_o[2, 2], I_o[0, 1], I_o[0, 2], I_o[1, 2]])
 
 
+def jointed_effort_design(obj, motion, noise) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """The equation of motion of a one-joint motion known exactly, per F/T sample (the wrench held over each
+    sensor period): effort = columns @ (M, [m d along, across the true first moment], f_c), with
+    M (q'(t + dt) - q'(t)) / dt, Q_g at the period's middle and f_c sign(q'). Returns (names of
+    `jointed_truth`'s quantities each column measures, columns [K, P], the effort's noise variance [K] from the
+    sensor's (variance plus quantisation, isotropic in its axes, through the lever arm), moving [K])."""
+    from scipy.spatial.transform import Rotation
+
+    from assets.conventions import GRAVITY_M_S2
+
+    held = motion.held
+    t, dt = held.t_wrench_s, held.t_wrench_s[1] - held.t_wrench_s[0]
+    q = np.interp(t + dt / 2, held.t_s, motion.q)
+    qd = np.interp(t, held.t_s, motion.qd)
+    qdd = (np.interp(t + dt, held.t_s, motion.qd) - qd) / dt
+    a = np.asarray(obj.axis, dtype=float)
+    force_var = noise.force_sigma_n**2 + noise.force_resolution_n**2 / 12
+    torque_var = noise.torque_sigma_nm**2 + noise.torque_resolution_nm**2 / 12
+    if obj.joint_type == "prismatic":
+        names, columns, var = ["mass"], [qdd - GRAVITY_M_S2 @ a], np.full(len(t), force_var)
+    else:
+        r = grasp_positions(held, t) - np.asarray(obj.origin_m)
+        names, columns = ["axis_inertia"], [qdd]
+        var = torque_var + force_var * np.sum(np.cross(a, r) ** 2, axis=1)
+        if np.linalg.norm(np.cross(a, GRAVITY_M_S2)) > 1e-3 * np.linalg.norm(GRAVITY_M_S2):  # a tilted axis
+            r_com = np.asarray(obj.position_m) - np.asarray(obj.origin_m)
+            u = r_com - a * (a @ r_com)
+            u /= np.linalg.norm(u)
+            turn = Rotation.from_rotvec(np.outer(q, a))
+            names += ["gravity_moment", "gravity_moment_across"]
+            columns += [-(np.cross(turn.apply(e), GRAVITY_M_S2) @ a) for e in (u, np.cross(a, u))]
+    names.append("friction")
+    columns.append(np.sign(qd))
+    return names, np.stack(columns, 1), var, np.abs(qd) > 1e-3 * np.max(np.abs(qd))
+
+
+def grasp_positions(held, t_s: np.ndarray) -> np.ndarray:
+    """The grasp frame's origin [K, 3] at times t_s (the simulation's samples nearest them)."""
+    index = np.clip(np.rint(np.interp(t_s, held.t_s, np.arange(len(held.t_s)))).astype(int), 0, len(held.t_s) - 1)
+    return np.asarray(held.grasp_position_m)[index]
+
+
+def jointed_exact_motion_bound(obj, motion, noise) -> dict:
+    """Exact-motion Cramer-Rao bound on what a one-joint motion determines: standard deviations of
+    `jointed_truth`'s quantities in their units, from the F/T sensor's noise alone with the motion known
+    exactly (`jointed_effort_design`). Every estimator's spread is at least this; one that also reads the
+    motion from a tracker sits above it."""
+    names, columns, var, moving = jointed_effort_design(obj, motion, noise)
+    cov = np.linalg.inv(columns[moving].T @ (columns[moving] / var[moving, None]))
+    return {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(names) if n != "gravity_moment_across"}
+
+
 def bench_crlb(draws: int = 20, duration_s: float = 10.0, knot_s: float = 0.025) -> list[dict]:
     from scipy.spatial.transform import Rotation, Slerp
 

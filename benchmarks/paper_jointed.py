@@ -44,6 +44,7 @@ def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0, engine: str = "
         JointedMotionConfig, jointed_paper_objects, simulate_jointed, write_jointed_recording,
     )
     from pipelines.synth.mujoco_engine import simulate_jointed_mujoco
+    from benchmarks.crlb import jointed_exact_motion_bound
     from benchmarks.paper import engines
 
     simulators = {"newton": simulate_jointed, "mujoco": simulate_jointed_mujoco}
@@ -56,6 +57,7 @@ def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0, engine: str = "
             motions = {trial: simulators[sim](obj, config, motion_rng) for trial in ("trial", "heldout")}
             prior = uniform_density_prior(obj.mesh(), material_range(None))
             truth = jointed_truth(obj)
+            bound = jointed_exact_motion_bound(obj, motions["trial"], SensorNoise())
             found = []
             for seed in range(seeds):
                 rng = np.random.default_rng(seed)
@@ -89,7 +91,7 @@ def bench_paper_jointed(seeds: int = 5, duration_s: float = 8.0, engine: str = "
                         entry["selected"] = result.selected
                         entry["prior_mass_covered"] = bool(prior.lower[0] <= obj.mass_kg <= prior.upper[0])
                 found.append(entry)
-            rows.append(_row(name, obj, truth, found) | {"engine": sim})
+            rows.append(_row(name, obj, truth, found, bound) | {"engine": sim})
     rows.append(random_joint_cases(20))
     _print(rows)
     return rows
@@ -143,7 +145,9 @@ def random_joint_cases(count: int, seed: int = 7) -> dict:
             "prior_mass_covered": None}
 
 
-def _row(name, obj, truth, found) -> dict:
+def _row(name, obj, truth, found, bound: dict) -> dict:
+    """One object's draws summarised; bound: the trial's exact-motion bound per quantity
+    (`jointed_exact_motion_bound`)."""
     row = {"object": name, "joint": obj.joint_type, "kind_right": sum(f["kind"] == obj.joint_type for f in found),
            "draws": len(found), "axis_deg_max": max(f.get("axis_deg", np.nan) for f in found),
            "point_mm_max": max(f.get("point_mm", np.nan) for f in found),
@@ -158,13 +162,16 @@ def _row(name, obj, truth, found) -> dict:
         row[quantity] = {"true": true, "mean_abs_err_pct": float(np.mean(np.abs(err))),
                          "max_abs_err_pct": float(np.max(np.abs(err))),
                          "cv_pct": float(100 * est[:, 0].std() / est[:, 0].mean()),
-                         "covered_95": float(np.mean(np.abs(est[:, 0] - true) <= 1.96 * est[:, 1]))}
+                         "covered_95": float(np.mean(np.abs(est[:, 0] - true) <= 1.96 * est[:, 1])),
+                         "reported_std_pct": float(100 * np.mean(est[:, 1]) / true),
+                         "bound_std_pct": float(100 * bound.get(quantity, np.nan) / true)}
     return row
 
 
 def _print(rows: list[dict]) -> None:
     print(f"{'object':13} {'joint':9} {'engine':7} {'kind ok':>7} {'axis deg':>8} {'point mm':>8}  "
-          f"{'quantity':15} {'true':>10} {'|err| %':>8} {'max %':>7} {'CV %':>6} {'95% cover':>9}")
+          f"{'quantity':15} {'true':>10} {'|err| %':>8} {'max %':>7} {'CV %':>6} {'std %':>6} {'bound %':>7} "
+          f"{'95% cover':>9}")
     for r in rows:
         head = (f"{r['object']:13} {r['joint']:9} {r['engine']:7} {r['kind_right']:>3}/{r['draws']:<3} "
                 f"{r['axis_deg_max']:8.3f} {r['point_mm_max']:8.2f}")
@@ -172,7 +179,7 @@ def _print(rows: list[dict]) -> None:
             if q in r:
                 v = r[q]
                 print(f"{head}  {q:15} {v['true']:10.4g} {v['mean_abs_err_pct']:8.2f} {v['max_abs_err_pct']:7.2f} "
-                      f"{v['cv_pct']:6.2f} {v['covered_95']:9.2f}")
+                      f"{v['cv_pct']:6.2f} {v['reported_std_pct']:6.2f} {v['bound_std_pct']:7.3f} {v['covered_95']:9.2f}")
                 head = " " * len(head)
         if r["selected"]:
             ratio = r["mjcf_replay_ratio"]

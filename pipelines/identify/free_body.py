@@ -22,7 +22,7 @@ from assets import COM, MASS, MOMENTS, PRODUCTS, Inertial, Pose, symmetric_from_
 
 from .inertia import THETA_SIZE, flat_physical, physical_from_theta, physical_jacobian, theta_from_physical
 from .rollout import FreeBodyRollout
-from .windows import ShootingWindows
+from .windows import ShootingWindows, clustered_covariance
 
 # scales of the start-state corrections: position [m], rotation [rad], velocity [m/s], angular velocity [rad/s]
 CORRECTION_SCALE = np.array([1e-3] * 3 + [1e-2] * 3)
@@ -242,16 +242,13 @@ def window_robust_covariance(gram, jtr, theta) -> np.ndarray:
     the per-window scores give an honest spread. Start corrections are profiled
     out per window.
     """
-    W = len(gram)
     t, c = slice(0, THETA_SIZE), slice(THETA_SIZE, None)
     # eliminate what each window's own start correction can absorb (Schur complement)
     Hcc_inv = np.linalg.pinv(gram[:, c, c])
     Hct = gram[:, c, t]
     H = np.sum(gram[:, t, t] - Hct.transpose(0, 2, 1) @ Hcc_inv @ Hct, axis=0)
     scores = jtr[:, t] - np.einsum("wci,wcd,wd->wi", Hct, Hcc_inv, jtr[:, c])
-    H_inv = np.linalg.pinv(H)
-    meat = scores.T @ scores * W / max(W - THETA_SIZE, 1)
-    cov_theta = H_inv @ meat @ H_inv
+    cov_theta = clustered_covariance(np.linalg.pinv(H), scores, THETA_SIZE)
     Jp = physical_jacobian(theta)
     return Jp @ cov_theta @ Jp.T
 

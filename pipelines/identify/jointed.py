@@ -37,7 +37,7 @@ from pipelines.sim.joint import FRICTION_SMOOTHING
 
 from .joint_rollout import JointRollout, concat_windows, joint_effort, joint_windows
 from .kind import JointFit, joint_coordinates
-from .windows import lowpass, predicts_better
+from .windows import clustered_covariance, lowpass, predicts_better
 
 __all__ = ["JOINT_EFFECT_PARAMS", "JointedConfig", "JointedIdentification", "equation_of_motion_rows",
            "identify_jointed", "joint_body", "joint_effect_columns", "joint_effort", "replay_jointed"]
@@ -278,7 +278,12 @@ def _least_squares(parts, joint: JointFit, body: _BodyMap, config: JointedConfig
                                                * np.tanh(r["qd"] / config.friction_smoothing), config.smoothing_hz,
                                                r["rate_hz"]) for r in rows])
         A, x = np.column_stack([A, d_vs]), np.append(x, v_s)
-    cov = (residual @ residual) / max(1, len(b) - len(x)) * np.linalg.pinv(A.T @ A)
+    # the rows are low-passed, so their residuals are correlated over about 1 / smoothing_hz: clustered in
+    # blocks of a shooting window's length, as the Newton fit's covariance is
+    t = np.concatenate([r["t_s"] - r["t_s"][0] + 1e3 * i for i, r in enumerate(rows)])
+    block = np.unique(np.floor(t / config.window_s), return_inverse=True)[1]
+    scores = np.stack([A[block == g].T @ residual[block == g] for g in range(block.max() + 1)])
+    cov = clustered_covariance(np.linalg.pinv(A.T @ A), scores)
     return np.append(x, 0.0), np.pad(cov, (0, 1))  # a rigid grip (FRICTION_LAG), assumed
 
 
@@ -430,13 +435,12 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
 
     # window-clustered sandwich: the bread with start offsets eliminated, the meat from per-window scores
     _, _, A_s = solve(r, J, Jq, Jqd, 0.0)
-    bread = np.linalg.pinv(A_s)
     C_w = np.stack([np.stack([(Jq * Jq).sum(0), (Jq * Jqd).sum(0)], -1),
                     np.stack([(Jq * Jqd).sum(0), (Jqd * Jqd).sum(0)], -1)], -2)
     B = np.stack([np.einsum("isw,sw->iw", J, Jq), np.einsum("isw,sw->iw", J, Jqd)], -1)
     h_w = np.stack([(Jq * r).sum(0), (Jqd * r).sum(0)], -1)
     score = np.einsum("isw,sw->wi", J, r) - np.einsum("iwa,wab,wb->wi", B, np.linalg.inv(C_w + 1e-18 * np.eye(2)), h_w)
-    covariance = bread @ (score.T @ score) * (W / max(W - 1, 1)) @ bread
+    covariance = clustered_covariance(np.linalg.pinv(A_s), score)
 
     fits = {"window_s": config.window_s, "trial_rmse_q": float(np.sqrt(np.mean(r * r)))}
     selected, traces = "newton", None
