@@ -28,7 +28,7 @@ from assets import Inertial, Pose
 from assets.conventions import GRAVITY_M_S2
 
 from .noise import NoiseLevels, estimate_noise_levels
-from .windows import angular_velocity, central_derivative, lowpass, smoothed_pose_grid
+from .windows import angular_velocity, central_derivative, cluster_meat, lowpass, smoothed_pose_grid
 
 
 @dataclass(frozen=True)
@@ -201,8 +201,7 @@ def identify_least_squares(
     scores = (As * (bs - As @ pi)[:, None])
     blocks = np.add.reduceat(scores, np.arange(0, len(bs), rows_per_block), axis=0)
     H_inv = np.linalg.pinv(H)
-    B = len(blocks)
-    meat = blocks.T @ blocks * B / max(B - 10, 1)
+    meat = cluster_meat(blocks, 10)
     cov_pi = H_inv @ meat @ H_inv
 
     inertial, J = object_frame_from_pi(pi, X_tracked_body)

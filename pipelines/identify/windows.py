@@ -196,17 +196,21 @@ def concat_windows(parts: list[ShootingWindows]) -> ShootingWindows:
     )
 
 
-def clustered_covariance(bread: np.ndarray, scores: np.ndarray, fitted: int = 1) -> np.ndarray:
-    """Sandwich covariance of a least-squares estimate whose residuals are correlated within clusters and
-    independent between them: bread [P, P] (the inverse Gauss-Newton matrix), scores [G, P] (each cluster's
-    J^T r), with the small-sample factor G / (G - fitted).
+def cluster_meat(scores: np.ndarray, fitted: int = 1) -> np.ndarray:
+    """The sandwich's meat from per-cluster scores [G, P] (each cluster's J^T r) of a least-squares fit whose
+    residuals are correlated within a cluster (a shooting window, a block of low-passed rows) and independent
+    between clusters, with the small-sample factor G / (G - fitted).
 
-    Within a shooting window the residuals carry integrated sensor noise; rows low-passed at f_c are
-    correlated over about 1 / f_c. sigma^2 (J^T J)^-1 treats every row as independent: on a jointed part's
-    rows low-passed at 8 Hz from a 200 Hz grid it reported a third of the spread over noise draws.
+    sigma^2 (J^T J)^-1 treats every residual as independent: on a jointed part's rows low-passed at 8 Hz on a
+    200 Hz grid it reported a third of the spread over noise draws.
     """
     G = len(scores)
-    return bread @ (scores.T @ scores) @ bread * (G / max(G - fitted, 1))
+    return scores.T @ scores * (G / max(G - fitted, 1))
+
+
+def clustered_covariance(bread: np.ndarray, scores: np.ndarray, fitted: int = 1) -> np.ndarray:
+    """Sandwich covariance bread M bread: bread [P, P] the inverse Gauss-Newton matrix, M `cluster_meat`."""
+    return bread @ cluster_meat(scores, fitted) @ bread
 
 
 def predicts_better(mse: np.ndarray, reference: np.ndarray) -> bool:
