@@ -211,14 +211,11 @@ def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndar
 
 
 def unexplained(analysis: ResidualAnalysis, min_share: float, span_s: tuple[float, float] | None = None,
-                residual: np.ndarray | None = None, p_value: float = 1e-6, burst_share: float = 0.5
-                ) -> tuple[dict, ...]:
+                residual: np.ndarray | None = None, p_value: float = 1e-6) -> tuple[dict, ...]:
     """DESIGN.md `unexplained` entries for what a chosen model leaves: the stretches holding at least `min_share`
-    of the residual when some channel is not white (Ljung-Box p below `p_value`), and a stretch holding at least
-    `burst_share` of it that noise could not have put there (its localisation's "p_value" below `p_value`) even
-    where the residual passes as white: a burst of a few samples, a door's breakaway at one reversal, hardly
-    moves the autocorrelations Ljung-Box tests. Below half the residual such bursts are common where nothing is
-    missing (a clean MuJoCo cabinet door's last 0.2 s held 30 %), and a reversal's friction misfit is not noise.
+    of the residual, when some channel is not white (Ljung-Box p below `p_value`) or the stretch itself holds
+    more than noise would put there (its localisation's "p_value" below `p_value`: a burst of a few samples,
+    a door's breakaway at one reversal, hardly moves the autocorrelations Ljung-Box tests).
 
     With `span_s` (the evaluation's time span [s]) and `residual` [N, channels], a non-white residual in which no
     stretch stands out (a mismatch spread over everything) is reported per non-white channel over that span,
@@ -227,8 +224,7 @@ def unexplained(analysis: ResidualAnalysis, min_share: float, span_s: tuple[floa
     white = min(analysis.whiteness_p) >= p_value
     stretches = tuple({"summary": s["summary"], "where": s["where"], "share": s["share"]}
                       for s in analysis.localisation
-                      if s["share"] >= min_share and (not white or (s["share"] >= burst_share
-                                                                    and s.get("p_value", 1.0) < p_value)))
+                      if s["share"] >= min_share and (not white or s.get("p_value", 1.0) < p_value))
     if white or stretches or span_s is None or residual is None:
         return stretches
     energy = np.sum(residual**2, axis=0)
