@@ -292,9 +292,7 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
     residuals = {"before": analyse(r_before), "after": analyse(r_after)}
     left = state or unexplained(residuals["after"], config.unexplained_share)
     doubtful = []
-    # what no candidate explains was absorbed by the friction and the body the joint determines (a MuJoCo oven
-    # door's breakaway 7x its friction, no candidate passing: axis inertia +54 %)
-    if left:
+    if state:
         doubtful += ["friction", "mass" if joint.type == "prismatic" else "inertia"]
     if not prior.mass / config.prior_mass_factor <= final.inertial.mass <= prior.mass * config.prior_mass_factor \
             and "mass" not in doubtful:

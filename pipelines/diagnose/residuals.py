@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
-from scipy.stats import chi2, f as f_distribution
+from scipy.stats import chi2
 
 from pipelines.identify import NewtonEulerRows
 
@@ -105,8 +105,7 @@ def analyse_residuals(rows: NewtonEulerRows, residual: np.ndarray, *, stride: in
         xcorr_peak_lag_s=[lag / rows.rate_hz for lag, _ in lags],
         xcorr_peak=[p for _, p in lags],
         correlation={k: [_pearson(residual[:, j], f[:, j]) for j in range(6)] for k, f in features.items()},
-        localisation=_localise(rows.t_s, energy, np.sum(residual**2, axis=1), speed, excess,
-                               independent=(stride, 6)),
+        localisation=_localise(rows.t_s, energy, np.sum(residual**2, axis=1), speed, excess),
     )
 
 
@@ -125,7 +124,7 @@ def analyse_joint_residual(t_s: np.ndarray, q: np.ndarray, qd: np.ndarray, effor
         xcorr_peak_lag_s=[lag / rate_hz], xcorr_peak=[peak],
         correlation={k: [_pearson(residual, f)] for k, f in features.items()},
         localisation=_localise(t_s, energy, residual**2, np.abs(qd), excess, speed_name="|qdot|", speed_unit=unit,
-                               what="joint effort residual", independent=(stride, 1)),
+                               what="joint effort residual"),
         channels=("effort",),
     )
 
@@ -166,14 +165,11 @@ def analyse_planar_residual(t_s: np.ndarray, velocity: np.ndarray, force: np.nda
 
 def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndarray, excess: float,
               speed_name: str = "|v|", speed_unit: str = "m/s", what: str = "wrench residual",
-              recordings: np.ndarray | None = None, independent: tuple[int, int] | None = None) -> list[dict]:
+              recordings: np.ndarray | None = None) -> list[dict]:
     """Stretches where the smoothed residual energy exceeds `excess` x its median, largest share first.
 
     recordings: per sample, the name of the recording it comes from (several evaluation recordings run one
     after another, each with its own clock): a stretch ends where the recording does, and says which it is.
-    independent: (stride, channels): every stride-th sample of each channel is nearly independent. Each
-    stretch then gets "p_value": the chance that noise alone puts as much of the residual in a stretch as long
-    anywhere in the recording (its mean square against the rest's, an F test, times the stretches that fit).
     """
     level = excess * np.median(energy)
     hot = (energy > level).astype(int)
@@ -194,38 +190,29 @@ def _localise(t: np.ndarray, energy: np.ndarray, raw: np.ndarray, speed: np.ndar
         if recordings is not None:
             where["recording"] = str(recordings[a])
             source = f" of {recordings[a]}"
-        entry = {
+        out.append({
             "summary": f"{what} up to {ratio:.1f}x its typical size at t = {t[a]:.2f}-{t[b - 1]:.2f} s{source}, "
                        f"{speed_name} = {lo:.2f}-{hi:.2f} {speed_unit} ({100 * share:.0f} % of the residual)",
             "where": where,
             "share": share,
-        }
-        if independent is not None and 0.0 < share < 1.0:
-            stride, channels = independent
-            inside = max(1.0, (b - a) / stride) * channels
-            outside = max(1.0, (len(raw) - (b - a)) / stride) * channels
-            tail = f_distribution.sf((share / inside) / ((1.0 - share) / outside), inside, outside)
-            entry["p_value"] = float(min(1.0, tail * len(raw) / (b - a)))
-        out.append(entry)
+        })
     return sorted(out, key=lambda d: -d["share"])
 
 
 def unexplained(analysis: ResidualAnalysis, min_share: float, span_s: tuple[float, float] | None = None,
                 residual: np.ndarray | None = None, p_value: float = 1e-6) -> tuple[dict, ...]:
-    """DESIGN.md `unexplained` entries for what a chosen model leaves: the stretches holding at least `min_share`
-    of the residual, when some channel is not white (Ljung-Box p below `p_value`) or the stretch itself holds
-    more than noise would put there (its localisation's "p_value" below `p_value`: a burst of a few samples,
-    a door's breakaway at one reversal, hardly moves the autocorrelations Ljung-Box tests).
+    """DESIGN.md `unexplained` entries for what a chosen model leaves: when some channel is not white (Ljung-Box
+    p below `p_value`), the stretches holding at least `min_share` of the residual.
 
     With `span_s` (the evaluation's time span [s]) and `residual` [N, channels], a non-white residual in which no
     stretch stands out (a mismatch spread over everything) is reported per non-white channel over that span,
     with the channel's share of the residual.
     """
-    white = min(analysis.whiteness_p) >= p_value
+    if min(analysis.whiteness_p) >= p_value:
+        return ()
     stretches = tuple({"summary": s["summary"], "where": s["where"], "share": s["share"]}
-                      for s in analysis.localisation
-                      if s["share"] >= min_share and (not white or s.get("p_value", 1.0) < p_value))
-    if white or stretches or span_s is None or residual is None:
+                      for s in analysis.localisation if s["share"] >= min_share)
+    if stretches or span_s is None or residual is None:
         return stretches
     energy = np.sum(residual**2, axis=0)
     return tuple(
