@@ -282,10 +282,11 @@ def _least_squares(parts, joint: JointFit, body: _BodyMap, config: JointedConfig
                                                r["rate_hz"]) for r in rows])
         A, x = np.column_stack([A, d_vs]), np.append(x, v_s)
     # the rows are low-passed, so their residuals are correlated over about 1 / smoothing_hz: clustered in
-    # blocks of a shooting window's length, as the Newton fit's covariance is
-    t = np.concatenate([r["t_s"] - r["t_s"][0] + 1e3 * i for i, r in enumerate(rows)])
-    block = np.unique(np.floor(t / config.window_s), return_inverse=True)[1]
-    scores = np.stack([A[block == g].T @ residual[block == g] for g in range(block.max() + 1)])
+    # blocks of a shooting window's length within each recording, as the Newton fit's covariance is by window
+    ends = np.cumsum([0] + [len(r["tau"]) for r in rows])
+    starts = np.concatenate([np.arange(a, b, max(1, round(config.window_s * r["rate_hz"])))
+                             for a, b, r in zip(ends[:-1], ends[1:], rows)])
+    scores = np.add.reduceat(A * residual[:, None], starts, axis=0)
     bread = np.linalg.pinv(A.T @ A)
     row_std = np.sqrt((residual @ residual) / max(1, len(b) - len(x)) * np.diag(bread))
     # the grip's lag (FRICTION_LAG) last: rigid, assumed
