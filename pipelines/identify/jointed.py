@@ -89,6 +89,10 @@ class JointedConfig:
     """Windows start once the joint has moved: |q'| above this [m/s] or [rad/s] somewhere before."""
     fit_grip: bool = True
     """Fit the friction's grip lag (`FRICTION_LAG`) after the body; otherwise the friction grips rigidly."""
+    least_squares_min_speed: float = 0.3
+    """The least squares keeps the rows where |q'| exceeds this fraction of its RMS over the recording (all rows
+    where a Stribeck breakaway is fitted): around a reversal or a hold the low-passed tanh friction is not how a
+    joint sticks, and what it leaves correlates with q''."""
 
 
 @dataclass(frozen=True)
@@ -241,6 +245,17 @@ def equation_of_motion_rows(recording, joint: JointFit, body: _BodyMap, config: 
             "rate_hz": 1 / period}
 
 
+def moving_rows(rows: dict, min_speed: float) -> dict:
+    """`equation_of_motion_rows` where |q'| exceeds `min_speed` times its RMS.
+
+    Around a reversal or a hold a joint sticks as its friction law has it (MuJoCo's soft `frictionloss`, a
+    Stribeck breakaway, a rigid Coulomb grip), not as the rows' low-passed tanh, and what is left correlates with
+    q''. On MuJoCo-made drawers and doors, clean, least squares over every row put the determined quantity 0.3-8 %
+    high, over these rows within 2.5 %; on an oven door with a breakaway 7x its friction +33 % against -0.6 %."""
+    keep = np.abs(rows["qd"]) > min_speed * np.sqrt(np.mean(rows["qd"] ** 2))
+    return {k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in rows.items()}
+
+
 def joint_effect_columns(name: str, rows: dict, config: JointedConfig, stribeck_speed: float = 1.0) -> np.ndarray:
     """[N, k] regression columns of effect `name`'s linear parameters (tau = ... + columns @ x): the
     robot pushes against the passive force; stribeck_friction at a given v_s."""
@@ -263,6 +278,8 @@ def _least_squares(parts, joint: JointFit, body: _BodyMap, config: JointedConfig
     covariance taken from the linearised column at the best."""
     rows = [equation_of_motion_rows(r, joint, body, config) for r in parts]
     effects = [e for e, names in JOINT_EFFECT_PARAMS.items() if names[0] in body.names]
+    if "stribeck_friction" not in effects:
+        rows = [moving_rows(r, config.least_squares_min_speed) for r in rows]
 
     def design(v_s):
         return np.concatenate([np.concatenate([r["columns"]] + [joint_effect_columns(e, r, config, v_s)
