@@ -71,6 +71,7 @@ def main_std(effect) -> float | None:
 def _diagnose_case(case: Case, duration_s: float, config) -> dict:
     """Record `case`, diagnose it as a build would, and score what came out (one table row, less its index)."""
     from pipelines.diagnose import diagnose_held, diagnose_jointed, diagnose_pushed
+    from pipelines.identify import identify_jointed
     from pipelines.identify.posterior import Z95
     from pipelines.identify.sliding import SUPPORTS, SlidingConfig, identify_pushed
 
@@ -81,7 +82,9 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
         if kind == "joint":
             record = record_mujoco_joint_case if mujoco else record_joint_case
             trial, holdout, joint, placement, prior = record(case, Path(tmp))
-            diagnosis, _ = diagnose_jointed([trial], holdout, joint, placement, prior, config=config)
+            diagnosis, refit = diagnose_jointed([trial], holdout, joint, placement, prior, config=config)
+            # a build keeps the refit with the chosen effects, else its identification (twin/jointed.py)
+            kept = refit or identify_jointed([trial], joint, placement, prior, holdout)
             oov = case.effect is not None and case.effect.name in OOV_EFFECTS
             true_fit = (true_joint_model_fit(replace(case, effect=None) if oov else case, holdout, joint, placement,
                                              config.joint_window_s))
@@ -120,8 +123,8 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
            "floor_m": diagnosis.noise_floor["rmse_position_m"] if diagnosis.noise_floor else None,
            "unexplained": [dict(u) for u in diagnosis.unexplained], "doubtful": list(diagnosis.doubtful),
            "mass_pct": None, "com_mm": None, "determined_pct": None, "oov_overlap": None, "push_truth": push_truth}
-    # the body a build publishes (a PosteriorResult): the refit with the chosen effects, else the identification's
-    after = kept.inertial if kind == "free" else diagnosis.inertial.get("after") if diagnosis.inertial else None
+    # the body a build publishes: the refit with the chosen effects, else the identification (a held body's posterior)
+    after = kept.inertial if kept is not None else None
     if kind in ("free", "joint") and after is not None:
         body = true_body(case)
         row["mass_pct"] = 100 * (after.mass - body.mass) / body.mass
