@@ -199,13 +199,24 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
         first, second = [h[0] for h in halves], [h[1] for h in halves]
         folds = [(first, r) for r in second] + [(second, r) for r in first]
     refits: dict[tuple, dict] = {}
+    base_fits: dict[JointedConfig, list] = {}
+
+    def fold_bases(cfg: JointedConfig) -> list:
+        """The base model fitted in `cfg`'s windows on each fold's training part."""
+        if cfg not in base_fits:
+            base_fits[cfg] = ([r[3] for r in evaluate(())["replays"]] if cfg == jconfig else
+                              [identify_jointed(list(train), joint, placement, prior, None, cfg) for train, _ in folds])
+        return base_fits[cfg]
 
     def evaluate(names: tuple) -> dict:
-        """Newton refit of the body with `names` on each fold's training part, replayed on its evaluation part."""
+        """Newton refit of the body with `names` on each fold's training part (started from the base fit too, which
+        it nests), replayed on its evaluation part."""
         if names not in refits:
             mse, replays = [], []
-            for train, test in folds:
-                ident = identify_jointed(list(train), joint, placement, prior, None, fit_config(names), effects=names)
+            nested = fold_bases(fit_config(names)) if names else [None] * len(folds)
+            for (train, test), base in zip(folds, nested):
+                ident = identify_jointed(list(train), joint, placement, prior, None, fit_config(names), effects=names,
+                                         nests=base)
                 b = joint_body(joint, placement, prior, jconfig, names)
                 replay, q_sim, w = replay_jointed(test, joint, placement, prior, b, ident.values, jconfig)
                 mse.append(_window_mse(q_sim, w))
@@ -213,20 +224,13 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
             refits[names] = {"mse": np.concatenate(mse), "replays": replays}
         return refits[names]
 
-    base_losses: dict[JointedConfig, list[float]] = {}
-
     def fits_better(names: tuple) -> bool:
         """Whether the set's fit lowers every fold's training loss below the base model's in the same windows.
         The base is nested in every set, so a fit that does not is not a better explanation of the data,
         whatever its replay does: on an oven door, whose windows diverge like an inverted pendulum's, a
         fitted spring of 7e-4 N m/rad with a higher training loss replayed the clean held-out trial 3 % better."""
-        cfg = fit_config(names)
-        if cfg not in base_losses:
-            base_losses[cfg] = (
-                [r[3].loss_history[-1] for r in evaluate(())["replays"]] if cfg == jconfig else
-                [identify_jointed(list(train), joint, placement, prior, None, cfg).loss_history[-1]
-                 for train, _ in folds])
-        return all(r[3].loss_history[-1] < b for r, b in zip(evaluate(names)["replays"], base_losses[cfg]))
+        return all(r[3].loss_history[-1] < b.loss_history[-1]
+                   for r, b in zip(evaluate(names)["replays"], fold_bases(fit_config(names))))
 
     base = evaluate(())
     passing = sorted((c for c in JOINT_CANDIDATES
@@ -244,13 +248,14 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
         _, q_before, windows, base_fit = refits[()]["replays"][0]
         _, q_after, _, final = refits[best]["replays"][0]
     else:  # the reported replay: the trial, by models fitted on all of it
-        def fitted(names):
-            ident = identify_jointed(trials, joint, placement, prior, None, fit_config(names), effects=names)
+        def fitted(names, nests=None):
+            ident = identify_jointed(trials, joint, placement, prior, None, fit_config(names), effects=names,
+                                     nests=nests)
             b = joint_body(joint, placement, prior, jconfig, names)
             return (*replay_jointed(evaluation, joint, placement, prior, b, ident.values, jconfig), ident)
 
         _, q_before, windows, base_fit = fitted(())
-        _, q_after, _, final = fitted(best) if best else (None, q_before, windows, base_fit)
+        _, q_after, _, final = fitted(best, base_fit) if best else (None, q_before, windows, base_fit)
     fits = {"before": replay_fit(joint, q_before, windows), "after": replay_fit(joint, q_after, windows)}
 
     effects = []
