@@ -272,7 +272,8 @@ def joint_effect_columns(name: str, rows: dict, config: JointedConfig, stribeck_
 
 def _least_squares(parts, joint: JointFit, body: _BodyMap, config: JointedConfig
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Linear least squares on the equation of motion (zero-phase low-passed q and tau): values, covariance and
+    """Linear least squares on the equation of motion (zero-phase low-passed q and tau, the rows where the joint
+    moves unless a Stribeck breakaway is fitted: `moving_rows`): values, covariance and
     the per-row standard errors (sigma^2 (A^T A)^-1, each low-passed row counted as independent: a third of the
     covariance's, the size of the Newton fit's start offsets). A Stribeck speed is searched on a grid, and its
     covariance taken from the linearised column at the best."""
