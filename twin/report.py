@@ -118,6 +118,8 @@ def diagnosis_section(asset: dict, traces: dict | None) -> str:
     d = asset.get("provenance", {}).get("diagnose")
     if not d:
         return ""
+    if "skipped" in d:
+        return f"<h2>Diagnosis</h2><p>Skipped: {html.escape(str(d['skipped']))}</p>"
     effects = "".join(
         f"<tr><td>{html.escape(e['name'])}</td><td>{_fmt(e['params'])}</td>"
         f"<td>{_fmt(e['evidence'].get('std', ''))}</td>"

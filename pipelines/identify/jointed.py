@@ -380,7 +380,8 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
                       np.stack([(Jq * Jqd).sum(0), (Jqd * Jqd).sum(0)], -1)], -2)  # [W, 2, 2]
         h = np.stack([(Jq * r).sum(0), (Jqd * r).sum(0)], -1)  # [W, 2]
         C = C + lam * np.einsum("wii->wi", C)[:, :, None] * np.eye(2) + 1e-18 * np.eye(2)
-        Cinv = np.linalg.inv(C)
+        # pinv: a window whose start the residual cannot see (a part held still throughout) has a singular block
+        Cinv = np.linalg.pinv(C)
         A_s = A - np.einsum("iwa,wab,jwb->ij", B, Cinv, B)
         g_s = g - np.einsum("iwa,wab,wb->i", B, Cinv, h)
         A_s = A_s + lam * np.diag(np.diag(A_s))
@@ -474,7 +475,7 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
                     np.stack([(Jq * Jqd).sum(0), (Jqd * Jqd).sum(0)], -1)], -2)
     B = np.stack([np.einsum("isw,sw->iw", J, Jq), np.einsum("isw,sw->iw", J, Jqd)], -1)
     h_w = np.stack([(Jq * r).sum(0), (Jqd * r).sum(0)], -1)
-    score = np.einsum("isw,sw->wi", J, r) - np.einsum("iwa,wab,wb->wi", B, np.linalg.inv(C_w + 1e-18 * np.eye(2)), h_w)
+    score = np.einsum("isw,sw->wi", J, r) - np.einsum("iwa,wab,wb->wi", B, np.linalg.pinv(C_w), h_w)
     covariance = clustered_covariance(np.linalg.pinv(A_s), score)
 
     fits = {"window_s": config.window_s, "trial_rmse_q": float(np.sqrt(np.mean(r * r)))}
