@@ -77,7 +77,7 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
 
     kind = case_kind(case)
     mujoco = case.engine == "mujoco"
-    joint = refit = kept = push_truth = None
+    joint = refit = kept = alone = push_truth = None
     with tempfile.TemporaryDirectory() as tmp:
         if kind == "joint":
             record = record_mujoco_joint_case if mujoco else record_joint_case
@@ -85,6 +85,8 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
             diagnosis, refit = diagnose_jointed([trial], holdout, joint, placement, prior, config=config)
             # a build keeps the refit with the chosen effects, else its identification (twin/jointed.py)
             kept = refit or identify_jointed([trial], joint, placement, prior, holdout)
+            # and a build without --holdout: the identification's own choice between its two estimates
+            alone = identify_jointed([trial], joint, placement, prior, None)
             oov = case.effect is not None and case.effect.name in OOV_EFFECTS
             true_fit = (true_joint_model_fit(replace(case, effect=None) if oov else case, holdout, joint, placement,
                                              config.joint_window_s))
@@ -121,7 +123,9 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
            "rmse_after_m": diagnosis.fits["after"].rmse_position_m,
            "rmse_true_m": None if true_fit is None else true_fit.rmse_position_m,
            "floor_m": diagnosis.noise_floor["rmse_position_m"] if diagnosis.noise_floor else None,
-           "unexplained": [dict(u) for u in diagnosis.unexplained], "doubtful": list(diagnosis.doubtful),
+           "unexplained": [dict(u) for u in diagnosis.unexplained],
+           # what a build flags: the diagnosis's doubtful values, and its identification's where that is kept
+           "doubtful": list(diagnosis.doubtful) + list(getattr(kept, "doubtful", ())),
            "mass_pct": None, "com_mm": None, "determined_pct": None, "oov_overlap": None, "push_truth": push_truth}
     # the body a build publishes: the refit with the chosen effects, else the identification (a held body's posterior)
     after = kept.inertial if kept is not None else None
@@ -132,6 +136,8 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
         if kind == "joint":
             d_true = determined_quantity(case, body)
             row["determined_pct"] = 100 * (determined_quantity(case, after) - d_true) / d_true
+            row["alone"] = {"selected": alone.selected, "doubtful": list(alone.doubtful),
+                            "determined_pct": 100 * (determined_quantity(case, alone.inertial) - d_true) / d_true}
         else:  # the inertia about the COM, relative Frobenius error
             row["determined_pct"] = 100 * float(np.linalg.norm(after.inertia_matrix() - body.inertia_matrix())
                                                 / np.linalg.norm(body.inertia_matrix()))
@@ -209,6 +215,10 @@ def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0
                 print(f"      unexplained: {u['summary']}")
             if row["doubtful"]:
                 print(f"      doubtful: {', '.join(row['doubtful'])}")
+            if row.get("alone"):
+                a = row["alone"]
+                print(f"      without --holdout: {a['selected']} kept, the determined quantity {a['determined_pct']:+.1f} %"
+                      + (f", doubtful: {', '.join(a['doubtful'])}" if a["doubtful"] else ""))
     for name in engines:
         print(f"\n== {name} ==")
         _summary([r for r in rows if r["engine"] == name])
@@ -286,6 +296,13 @@ def _summary(rows: list[dict]) -> None:
                       f"{sum(r['moments_determined'] for r in of)} of {3 * len(of)} in {len(some)} rows, all within "
                       f"5 % in {sum(r['moments_pct'] <= 5 for r in some)}/{len(some)}; every moment within 2 std in "
                       f"{sum(r['moments_covered'] for r in of)}/{3 * len(of)}")
+    alone = [r for r in rows if r.get("alone")]
+    if alone:
+        off = [r for r in alone if abs(r["alone"]["determined_pct"]) > 5]
+        ok = [r for r in alone if r not in off]
+        print(f"the identification without a held-out recording (joint): the quantity the joint determines within 5 % "
+              f"in {len(ok)}/{len(alone)}; flagged doubtful in {sum(bool(r['alone']['doubtful']) for r in off)}/"
+              f"{len(off)} of the others, in {sum(bool(r['alone']['doubtful']) for r in ok)}/{len(ok)} of those within")
     print(f"held-out position RMSE at least halved: {len(halved)}/{len(reported)} where an effect is reported")
     halvable = [r for r in reported if r["rmse_true_m"] <= 0.5 * r["rmse_before_m"]]
     print(f"  the true model halves it in {len(halvable)}/{len(reported)}; ours halves it in "

@@ -10,7 +10,7 @@ import numpy as np
 from assets import COM, MASS, MOMENTS, Asset, Estimate, Fit, FitMetrics, Joint, Theta
 from pipelines.validate import replay_jointed_mujoco, validate_jointed_exports
 from twin.stages import Identified, Prepared, kind_hint, log_diagnosis, weighed_where_prior
-from twin.summary import bounds_flags, doubtful_flags, extent_flags
+from twin.summary import bounds_flags, disagreement_flags, doubtful_flags, extent_flags
 from twin.write import mesh_geometry
 
 LIMIT_MARGIN = 0.1
@@ -117,7 +117,8 @@ def jointed_asset(p: Prepared) -> Identified:
         effects=diagnosis.effects if diagnosis else (),
         unexplained=diagnosis.unexplained if diagnosis else (),
         flags=(bounds_flags(theta, prior.lower, prior.upper) + extent_flags(p.scan_stats.get("extent"))
-               + doubtful_flags(diagnosis.doubtful if diagnosis else ())),
+               + doubtful_flags(diagnosis.doubtful if diagnosis else ()) + disagreement_flags(kept.doubtful,
+                                                                                               kept.disagreement)),
     )
 
     def replay(asset, tmp: Path, files: dict) -> dict:

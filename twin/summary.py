@@ -27,6 +27,16 @@ def doubtful_flags(doubtful) -> tuple[dict, ...]:
              "these; they are not to be taken as measured", "components": sorted(doubtful)},)
 
 
+def disagreement_flags(doubtful, disagreement: dict) -> tuple[dict, ...]:
+    """The determined quantities on which the Newton fit and least squares disagree
+    (`JointedIdentification.doubtful`): a force neither models bends them."""
+    if not doubtful:
+        return ()
+    return ({"parameter": "identification", "problem": "doubtful: the Newton fit and least squares disagree on these, "
+             "a force neither models may have bent them; they are not to be taken as measured",
+             "components": sorted(doubtful), "apart": {n: disagreement[n]["share"] for n in sorted(doubtful)}},)
+
+
 def bounds_flags(theta, lower, upper) -> tuple[dict, ...]:
     """A measured mass or principal moment outside the geometry prior's bounds C.
 

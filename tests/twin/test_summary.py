@@ -1,5 +1,7 @@
 """A weighing used as a measurement, values outside the prior flagged, and the build's closing words."""
 
+import json
+
 import numpy as np
 import pytest
 import trimesh
@@ -8,7 +10,7 @@ from assets import Estimate, Inertial, Theta
 from pipelines.identify import with_weighed_mass
 from pipelines.priors import estimate_prior
 from twin.build import weighed_where_prior
-from twin.summary import bounds_flags, doubtful_flags, dominated_flags, summary_lines
+from twin.summary import bounds_flags, disagreement_flags, doubtful_flags, dominated_flags, summary_lines
 
 
 def _theta(mass: float, source: str = "measured") -> Theta:
@@ -62,11 +64,14 @@ def test_a_measured_mass_outside_the_prior_is_flagged_and_said():
 
 
 def test_what_the_recordings_left_to_the_prior_or_a_mismatch_corrupted_is_flagged_and_said():
-    assert dominated_flags(set()) == () and doubtful_flags(()) == ()
-    flags = dominated_flags({"Ixz", "Ixy"}) + doubtful_flags(("mass", "friction"))
+    assert dominated_flags(set()) == () and doubtful_flags(()) == () and disagreement_flags((), {}) == ()
+    flags = (dominated_flags({"Ixz", "Ixy"}) + doubtful_flags(("mass", "friction"))
+             + disagreement_flags(("axis_inertia",), {"axis_inertia": {"share": 0.22, "z": 2.5}}))
     doc = {"theta": {"mass": {"source": "measured"}}, "flags": list(flags),
            "provenance": {"identify": {"selected": "posterior", "choice": "posterior: no held-out recording"}}}
     lines = summary_lines(doc)
     assert lines[0] == "kept the posterior: no held-out recording"
-    assert lines[-2].startswith("FLAG: inertial: prior-dominated") and lines[-2].endswith("(Ixy, Ixz)")
-    assert lines[-1].startswith("FLAG: diagnosis: doubtful") and lines[-1].endswith("(friction, mass)")
+    assert lines[-3].startswith("FLAG: inertial: prior-dominated") and lines[-3].endswith("(Ixy, Ixz)")
+    assert lines[-2].startswith("FLAG: diagnosis: doubtful") and lines[-2].endswith("(friction, mass)")
+    assert lines[-1].startswith("FLAG: identification: doubtful") and lines[-1].endswith("(axis_inertia)")
+    assert json.loads(json.dumps(flags))[-1]["apart"] == {"axis_inertia": 0.22}
