@@ -125,7 +125,7 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
            "floor_m": diagnosis.noise_floor["rmse_position_m"] if diagnosis.noise_floor else None,
            "unexplained": [dict(u) for u in diagnosis.unexplained],
            # what a build flags: the diagnosis's doubtful values, and its identification's where that is kept
-           "doubtful": list(diagnosis.doubtful) + list(getattr(kept, "doubtful", ())),
+           "doubtful": sorted(set(diagnosis.doubtful) | set(getattr(kept, "doubtful", ()))),
            "mass_pct": None, "com_mm": None, "determined_pct": None, "oov_overlap": None, "push_truth": push_truth}
     # the body a build publishes: the refit with the chosen effects, else the identification (a held body's posterior)
     after = kept.inertial if kept is not None else None
