@@ -117,8 +117,8 @@ def jointed_asset(p: Prepared) -> Identified:
         effects=diagnosis.effects if diagnosis else (),
         unexplained=diagnosis.unexplained if diagnosis else (),
         flags=(bounds_flags(theta, prior.lower, prior.upper) + extent_flags(p.scan_stats.get("extent"))
-               + doubtful_flags(diagnosis.doubtful if diagnosis else ()) + disagreement_flags(kept.doubtful,
-                                                                                               kept.disagreement)),
+               + doubtful_flags(diagnosis.doubtful if diagnosis else ())
+               + disagreement_flags(kept.doubtful, kept.disagreement)),
     )
 
     def replay(asset, tmp: Path, files: dict) -> dict:
