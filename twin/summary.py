@@ -34,7 +34,7 @@ def disagreement_flags(doubtful, disagreement: dict) -> tuple[dict, ...]:
         return ()
     return ({"parameter": "identification", "problem": "doubtful: the Newton fit and least squares disagree on these, "
              "a force neither models may have bent them; they are not to be taken as measured",
-             "components": sorted(doubtful), "apart": {n: disagreement[n]["share"] for n in sorted(doubtful)}},)
+             "components": sorted(doubtful), "apart": {n: disagreement[n] for n in sorted(doubtful)}},)
 
 
 def bounds_flags(theta, lower, upper) -> tuple[dict, ...]:

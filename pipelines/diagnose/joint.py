@@ -170,8 +170,8 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
     """
     rng = np.random.default_rng(config.seed)
     # candidates compared with a rigid grip: a fitted grip let a damping stand in for the load MuJoCo's soft
-    # frictionloss leaks while it holds, and named it on a clean cabinet door
-    # and each fit is the Newton fit: the base model's least squares is no candidate's estimate
+    # frictionloss leaks while it holds, and named it on a clean cabinet door. Each fit is compared by its Newton
+    # fit, never swapped for least squares (which lacks the candidate): no disagreement marks it doubtful here.
     identification = replace(jconfig, fit_grip=False, disagreement_share=np.inf)
     jconfig = replace(identification, window_s=config.joint_window_s)
 

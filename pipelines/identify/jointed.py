@@ -133,8 +133,8 @@ class JointedIdentification:
     step_s: float = 0.0
     """The rollout's step [s]: the friction grips with time constant friction_lag + step_s."""
     disagreement: dict = field(default_factory=dict)
-    """Per quantity the joint determines ("mass", "axis_inertia", "gravity_moment"): how far the Newton fit and
-    least squares put it apart, as a share of least squares' value ("share") and in standard errors ("z")."""
+    """Per quantity the joint determines ("mass", "axis_inertia", "gravity_moment"): how far apart the Newton fit and
+    least squares put it, as a share of least squares' value."""
     doubtful: tuple[str, ...] = ()
     """The quantities on which the two disagree beyond `JointedConfig.disagreement_share`: a force neither models
     bends them, whichever is kept."""
@@ -493,9 +493,9 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
     covariance = clustered_covariance(np.linalg.pinv(A_s), score)
 
     fits = {"window_s": config.window_s, "trial_rmse_q": float(np.sqrt(np.mean(r * r)))}
-    disagreement = _disagreement(body.names, p, covariance, x_ls, cov_ls)
-    doubtful = tuple(n for n, d in disagreement.items() if d["share"] > config.disagreement_share)
-    apart = ", ".join(f"{n} {100 * disagreement[n]['share']:.0f} %" for n in doubtful)
+    disagreement = _disagreement(body.names, p, x_ls)
+    doubtful = tuple(n for n, share in disagreement.items() if share > config.disagreement_share)
+    apart = ", ".join(f"{n} {100 * disagreement[n]:.0f} %" for n in doubtful)
     selected, traces = "newton", None
     choice = "Newton fit: no held-out recording (--holdout) to test least squares against it"
     if doubtful:
@@ -528,20 +528,17 @@ def identify_jointed(trials, joint: JointFit, placement: Pose, prior: Inertial, 
                                  fits, tuple(history), selected, traces, choice, windows.dt_s, disagreement, doubtful)
 
 
-def _disagreement(names, p, covariance, x_ls, cov_ls) -> dict:
-    """How far apart the Newton fit (p, covariance) and least squares put each determined quantity: the share of
-    least squares' value and the standard errors of the two summed (of the vector's largest component, for the
-    gravity moment)."""
+def _disagreement(names, p, x_ls) -> dict:
+    """How far apart the Newton fit p and least squares x_ls put each determined quantity, as a share of least
+    squares' value (of its vector, for the gravity moment)."""
     groups = {"mass": ["mass"], "axis_inertia": ["axis_inertia"],
               "gravity_moment": ["gravity_moment_e1", "gravity_moment_e2"]}
     out = {}
     for quantity, members in groups.items():
         i = [names.index(n) for n in members if n in names]
         if i:
-            gap = np.asarray(p)[i] - np.asarray(x_ls)[i]
-            std = np.sqrt(np.maximum(np.diag(covariance)[i] + np.diag(cov_ls)[i], 1e-300))
-            out[quantity] = {"share": float(np.linalg.norm(gap) / max(np.linalg.norm(np.asarray(x_ls)[i]), 1e-300)),
-                             "z": float(np.max(np.abs(gap) / std))}
+            ls = np.asarray(x_ls)[i]
+            out[quantity] = float(np.linalg.norm(np.asarray(p)[i] - ls) / max(np.linalg.norm(ls), 1e-300))
     return out
 
 

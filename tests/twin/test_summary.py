@@ -66,7 +66,7 @@ def test_a_measured_mass_outside_the_prior_is_flagged_and_said():
 def test_what_the_recordings_left_to_the_prior_or_a_mismatch_corrupted_is_flagged_and_said():
     assert dominated_flags(set()) == () and doubtful_flags(()) == () and disagreement_flags((), {}) == ()
     flags = (dominated_flags({"Ixz", "Ixy"}) + doubtful_flags(("mass", "friction"))
-             + disagreement_flags(("axis_inertia",), {"axis_inertia": {"share": 0.22, "z": 2.5}}))
+             + disagreement_flags(("axis_inertia",), {"axis_inertia": 0.22}))
     doc = {"theta": {"mass": {"source": "measured"}}, "flags": list(flags),
            "provenance": {"identify": {"selected": "posterior", "choice": "posterior: no held-out recording"}}}
     lines = summary_lines(doc)
