@@ -68,8 +68,11 @@ def main_std(effect) -> float | None:
     return None
 
 
-def _diagnose_case(case: Case, duration_s: float, config) -> dict:
-    """Record `case`, diagnose it as a build would, and score what came out (one table row, less its index)."""
+def _diagnose_case(case: Case, duration_s: float, config, with_holdout: bool = True) -> dict:
+    """Record `case`, diagnose it as a build would, and score what came out (one table row, less its index).
+
+    `with_holdout` False: as a build without --holdout, the diagnosis choosing on the trial's halves; the held-out
+    recording then only scores the true model."""
     from pipelines.diagnose import diagnose_held, diagnose_jointed, diagnose_pushed
     from pipelines.identify import identify_jointed
     from pipelines.identify.posterior import Z95
@@ -82,26 +85,29 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
         if kind == "joint":
             record = record_mujoco_joint_case if mujoco else record_joint_case
             trial, holdout, joint, placement, prior = record(case, Path(tmp))
-            diagnosis, refit = diagnose_jointed([trial], holdout, joint, placement, prior, config=config)
+            given = holdout if with_holdout else None
+            diagnosis, refit = diagnose_jointed([trial], given, joint, placement, prior, config=config)
             # a build keeps the refit with the chosen effects, else its identification (twin/jointed.py)
-            kept = refit or identify_jointed([trial], joint, placement, prior, holdout)
+            kept = refit or identify_jointed([trial], joint, placement, prior, given)
             # and a build without --holdout: the identification's own choice between its two estimates
-            alone = identify_jointed([trial], joint, placement, prior, None)
+            alone = identify_jointed([trial], joint, placement, prior, None) if with_holdout else None
             oov = case.effect is not None and case.effect.name in OOV_EFFECTS
             true_fit = (true_joint_model_fit(replace(case, effect=None) if oov else case, holdout, joint, placement,
                                              config.joint_window_s))
         elif kind == "push":
             trial, holdout, body, mu_prior = record_push_case(case, Path(tmp))
+            given = holdout if with_holdout else None
             # the support the build would choose (`identify_pushed`), which the diagnosis then keeps
-            support = identify_pushed([trial], holdout, body, mu_prior, SlidingConfig(), supports=SUPPORTS).config
-            diagnosis, refit = diagnose_pushed([trial], [holdout], body, mu_prior, support, config)
+            support = identify_pushed([trial], given, body, mu_prior, SlidingConfig(), supports=SUPPORTS).config
+            diagnosis, refit = diagnose_pushed([trial], [given] if given else [], body, mu_prior, support, config)
             true_fit, push_truth = None, true_push_replays(case, holdout, body, support.window_s)
         else:
             record = record_mujoco_case if mujoco else record_case
             trial, holdout, prior, X_tracked_body = record(case, Path(tmp), duration_s)
-            diagnosis = diagnose_held([trial], holdout, X_tracked_body, prior, config)
+            given = holdout if with_holdout else None
+            diagnosis = diagnose_held([trial], given, X_tracked_body, prior, config)
             true_fit = true_model_fit(case, holdout, X_tracked_body, prior, config.window_s)
-            kept = diagnosis.posterior or kept_held_body(case, trial, holdout, X_tracked_body)
+            kept = diagnosis.posterior or kept_held_body(case, trial, given, X_tracked_body)
     top = diagnosis.effects[0] if diagnosis.effects else None
     truth = case.effect.name if case.effect else None
     error = std = None
@@ -136,7 +142,7 @@ def _diagnose_case(case: Case, duration_s: float, config) -> dict:
         if kind == "joint":
             d_true = determined_quantity(case, body)
             row["determined_pct"] = 100 * (determined_quantity(case, after) - d_true) / d_true
-            row["alone"] = {"selected": alone.selected, "doubtful": list(alone.doubtful),
+            row["alone"] = None if alone is None else {"selected": alone.selected, "doubtful": list(alone.doubtful),
                             "determined_pct": 100 * (determined_quantity(case, alone.inertial) - d_true) / d_true}
         else:  # the inertia about the COM, relative Frobenius error
             row["determined_pct"] = 100 * float(np.linalg.norm(after.inertia_matrix() - body.inertia_matrix())
@@ -177,10 +183,11 @@ def _fmt(value, spec: str, width: int) -> str:
 
 
 def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0, seed: int = 0,
-                   bootstraps: int = 40, cases: tuple[int, ...] = (), engine: str = "newton") -> list[dict]:
+                   bootstraps: int = 40, cases: tuple[int, ...] = (), engine: str = "newton",
+                   with_holdout: bool = True) -> list[dict]:
     """Run every case (or only the indices `cases` of each engine's shuffled list, the same recordings as in the
     full run) on recordings made by `engine` ("newton", "mujoco" or "both"), print the table and the summary
-    per engine; returns the rows."""
+    per engine; returns the rows. `with_holdout` False diagnoses as a build without --holdout does."""
     from pipelines.diagnose import DiagnoseConfig
 
     if engine not in ("newton", "mujoco", "both"):
@@ -198,7 +205,7 @@ def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0
             if cases and k not in cases:
                 continue
             t0 = time.perf_counter()
-            row = _diagnose_case(case, duration_s, DiagnoseConfig(bootstraps=bootstraps, seed=case.seed))
+            row = _diagnose_case(case, duration_s, DiagnoseConfig(bootstraps=bootstraps, seed=case.seed), with_holdout)
             row.update(index=k, seconds=time.perf_counter() - t0)
             rows.append(row)
             mm = lambda v: None if v is None else 1000 * v  # noqa: E731

@@ -226,6 +226,9 @@ class Bench:
     """Recordings without one (diagnose)."""
     duration_s: float = 3.0
     """Length of each recording [s] (diagnose)."""
+    without_holdout: bool = False
+    """diagnose: as a build without --holdout, the diagnosis choosing on the trial's halves (the held-out
+    recording scores the true model only)."""
     cases: tuple[int, ...] = ()
     """diagnose: only these case indices of the shuffled list (the same recordings as the full run; default all)."""
     workshop: bool = False
@@ -477,7 +480,7 @@ def _run_bench(command: Bench) -> None:
             diagnose.bench_diagnose_push_synth(command.seeds)
         else:
             diagnose.bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases,
-                                    engine=command.engine)
+                                    engine=command.engine, with_holdout=not command.without_holdout)
     elif command.what == "workshop":
         _benchmark("workshop").bench_workshop(command.seeds, command.levels, method=command.identify_with,
                                               parts=command.parts)
