@@ -127,10 +127,18 @@ def _split(coef: np.ndarray, lib: Library, names) -> dict:
     return out
 
 
-def _fold_masks(lib: Library, folds: int) -> list[np.ndarray]:
-    edges = np.quantile(lib.sample, np.linspace(0, 1, folds + 1))
-    return [(lib.sample >= a) & ((lib.sample < b) | (k == folds - 1)) for k, (a, b) in enumerate(zip(edges[:-1],
-                                                                                                      edges[1:]))]
+def _within(rows: NewtonEulerRows, keep: np.ndarray) -> NewtonEulerRows:
+    """The rows of `rows` where `keep` holds."""
+    per_row = {f: getattr(rows, f) for f in rows.__dataclass_fields__ if f not in ("scale", "rate_hz", "cutoff_hz")}
+    return replace(rows, **{f: v[keep] for f, v in per_row.items()})
+
+
+def _delay(rows_at, com_tracked, additive, config: DiagnoseConfig) -> float:
+    """The time_delay [s] whose re-stamped rows (`rows_at(delay)`, a list of NewtonEulerRows) the model fits best."""
+    def rss(d):
+        return fit_subset(build_library(rows_at(d), com_tracked, additive), additive)[1]
+    return float(minimize_scalar(rss, bounds=(-config.max_delay_s, config.max_delay_s), method="bounded",
+                                 options={"xatol": 2e-4}).x)
 
 
 def _fit(trials, names, com_tracked, config: DiagnoseConfig) -> tuple[_Model, Library]:
@@ -138,11 +146,7 @@ def _fit(trials, names, com_tracked, config: DiagnoseConfig) -> tuple[_Model, Li
     additive = tuple(n for n in names if n != "time_delay")
     delay = 0.0
     if "time_delay" in names:
-        def rss(d):
-            lib = build_library([_rows(r, d) for r in trials], com_tracked, additive)
-            return fit_subset(lib, additive)[1]
-        delay = float(minimize_scalar(rss, bounds=(-config.max_delay_s, config.max_delay_s), method="bounded",
-                                      options={"xatol": 2e-4}).x)
+        delay = _delay(lambda d: [_rows(r, d) for r in trials], com_tracked, additive, config)
     lib = build_library([_rows(r, delay) for r in trials], com_tracked, additive)
     coef, _, _ = fit_subset(lib, additive)
     coefficients = _split(coef, lib, additive)
@@ -169,20 +173,34 @@ def _heldout_score(trials, holdout, names, com_tracked, config: DiagnoseConfig,
                    com_held: np.ndarray | None = None) -> float:
     """BIC of the held-out wrench prediction, or of time-blocked cross-validation without a held-out
     recording; `com_held` holds the COM at that point (tracked frame) instead of fitting it."""
-    model, lib = _fit(trials, names, com_tracked, config)
     additive = tuple(n for n in names if n != "time_delay")
     k = _parameter_count(names) - (3 if com_held is not None else 0)
-    X = _design(lib, additive, com_held)
     if holdout is not None:
-        coef, *_ = np.linalg.lstsq(X, lib.y, rcond=None)
+        model, lib = _fit(trials, names, com_tracked, config)
+        coef, *_ = np.linalg.lstsq(_design(lib, additive, com_held), lib.y, rcond=None)
         held = build_library([_rows(holdout, model.delay_s)], com_tracked, additive)
         r = held.y - _design(held, additive, com_held) @ coef
         return bic(float(r @ r), len(r), k)
+    # each trial cut into `folds` blocks in time; every parameter, a delay too, fitted without the block it
+    # predicts: a delay fitted on all of it put one on a clean MuJoCo-made sphere, which its held-out recording
+    # did not want
     rss, n = 0.0, 0
-    for mask in _fold_masks(lib, config.folds):
-        coef, *_ = np.linalg.lstsq(X[~mask], lib.y[~mask], rcond=None)
-        r = lib.y[mask] - X[mask] @ coef
-        rss, n = rss + float(r @ r), n + int(mask.sum())
+    for fold in range(config.folds):
+        def rows_at(d, inside: bool):
+            out = []
+            for recording in trials:
+                rows = _rows(recording, d)
+                t0, t1 = recording.pose.t_s[0], recording.pose.t_s[-1]
+                a, b = (t0 + (t1 - t0) * np.array([fold, fold + 1]) / config.folds)
+                block = (rows.t_s >= a) & ((rows.t_s < b) | (fold == config.folds - 1))
+                out.append(_within(rows, block == inside))
+            return out
+        delay = (_delay(lambda d: rows_at(d, False), com_tracked, additive, config)
+                 if "time_delay" in names else 0.0)
+        train, test = (build_library(rows_at(delay, inside), com_tracked, additive) for inside in (False, True))
+        coef, *_ = np.linalg.lstsq(_design(train, additive, com_held), train.y, rcond=None)
+        r = test.y - _design(test, additive, com_held) @ coef
+        rss, n = rss + float(r @ r), n + len(r)
     return bic(rss, n, k)
 
 
