@@ -71,7 +71,7 @@ def main_std(effect) -> float | None:
 def _diagnose_case(case: Case, duration_s: float, config, with_holdout: bool = True) -> dict:
     """Record `case`, diagnose it as a build would, and score what came out (one table row, less its index).
 
-    `with_holdout` False: as a build without --holdout, the diagnosis choosing on the trial's halves; the held-out
+    `with_holdout` False: as a build without --holdout, the diagnosis choosing on the trial alone; the held-out
     recording then only scores the true model."""
     from pipelines.diagnose import diagnose_held, diagnose_jointed, diagnose_pushed
     from pipelines.identify import identify_jointed
@@ -142,8 +142,9 @@ def _diagnose_case(case: Case, duration_s: float, config, with_holdout: bool = T
         if kind == "joint":
             d_true = determined_quantity(case, body)
             row["determined_pct"] = 100 * (determined_quantity(case, after) - d_true) / d_true
-            row["alone"] = None if alone is None else {"selected": alone.selected, "doubtful": list(alone.doubtful),
-                            "determined_pct": 100 * (determined_quantity(case, alone.inertial) - d_true) / d_true}
+            row["alone"] = None if alone is None else {
+                "selected": alone.selected, "doubtful": list(alone.doubtful),
+                "determined_pct": 100 * (determined_quantity(case, alone.inertial) - d_true) / d_true}
         else:  # the inertia about the COM, relative Frobenius error
             row["determined_pct"] = 100 * float(np.linalg.norm(after.inertia_matrix() - body.inertia_matrix())
                                                 / np.linalg.norm(body.inertia_matrix()))

@@ -227,7 +227,7 @@ class Bench:
     duration_s: float = 3.0
     """Length of each recording [s] (diagnose)."""
     without_holdout: bool = False
-    """diagnose: as a build without --holdout, the diagnosis choosing on the trial's halves (the held-out
+    """diagnose: as a build without --holdout, the diagnosis choosing on the trial alone (the held-out
     recording scores the true model only)."""
     cases: tuple[int, ...] = ()
     """diagnose: only these case indices of the shuffled list (the same recordings as the full run; default all)."""
