@@ -37,7 +37,7 @@ from pipelines.sim.joint import FRICTION_SMOOTHING
 
 from .joint_rollout import JointRollout, concat_windows, joint_effort, joint_windows
 from .kind import JointFit, joint_coordinates
-from .windows import clustered_covariance, lowpass, predicts_better
+from .windows import clustered_covariance, lowpass, lowpass_edge_samples, predicts_better
 
 __all__ = ["JOINT_EFFECT_PARAMS", "JointedConfig", "JointedIdentification", "equation_of_motion_rows",
            "identify_jointed", "joint_body", "joint_effect_columns", "joint_effort", "replay_jointed"]
@@ -232,7 +232,7 @@ class _BodyMap:
 
 def equation_of_motion_rows(recording, joint: JointFit, body: _BodyMap, config: JointedConfig) -> dict:
     """One recording's equation of motion as regression rows on a uniform grid (zero-phase low-passed q
-    and tau), ends trimmed: "t_s", "q", "qd", "tau" [N], "columns" [N, base parameters] such that
+    and tau), ends trimmed where the low-pass rings (`lowpass_edge_samples`): "t_s", "q", "qd", "tau" [N], "columns" [N, base parameters] such that
     columns @ (base parameters) = tau in the base model."""
     t = recording.pose.t_s
     q = joint_coordinates(joint, recording.pose)
@@ -245,7 +245,8 @@ def equation_of_motion_rows(recording, joint: JointFit, body: _BodyMap, config: 
     tau = np.interp(grid, t_w, lowpass(tau, config.smoothing_hz, 1 / float(np.median(np.diff(t_w)))))
     # rows start once the part moves: while it is held still, tracker noise in q' switches tanh(q'/eps) at random
     start = int(np.argmax(np.abs(qs - qs[0]) > 0.02 * np.ptp(qs)))
-    keep = slice(max(20, start), -20)
+    edge = lowpass_edge_samples(config.smoothing_hz, 1 / period)
+    keep = slice(max(edge, start), -edge)
     cols = [qdd]
     if body.joint.type == "prismatic":
         cols[0] = qdd - GRAVITY_M_S2 @ joint.axis  # m (q'' - g.a) = tau - friction
