@@ -21,7 +21,7 @@ from pipelines.sim.joint import (
 )
 
 from .kind import JointFit, joint_coordinates
-from .windows import lowpass, lowpass_edge_samples
+from .windows import lowpass
 
 if TYPE_CHECKING:
     from .jointed import JointedConfig
@@ -69,9 +69,8 @@ def joint_windows(recording, joint: JointFit, config: JointedConfig) -> JointWin
     if len(moving) == 0:
         raise ValueError(f"{recording.path}: the joint never moves (|dq/dt| below {config.hold_speed})")
     t_wrench, tau = joint_effort(recording, joint)
-    edge = lowpass_edge_samples(config.smoothing_hz, 1.0 / period)  # where the smoothed start states ring
-    first = max(moving[0], int(np.searchsorted(grid, t_wrench[0])) + 1, edge)
-    last = min(len(grid) - edge, int(np.searchsorted(grid, t_wrench[-1])) - 1)
+    first = max(moving[0], int(np.searchsorted(grid, t_wrench[0])) + 1, 10)
+    last = min(len(grid) - 10, int(np.searchsorted(grid, t_wrench[-1])) - 1)
     starts = np.arange(first, last - samples, samples)
     if len(starts) == 0:
         raise ValueError(f"{recording.path}: too short for one {config.window_s} s window of motion")
