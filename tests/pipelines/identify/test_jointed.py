@@ -131,20 +131,21 @@ def test_least_squares_reads_a_joint_where_it_moves(tmp_path: Path):
     assert len(moving["tau"]) > 0.6 * len(rows["tau"])
 
 
-def test_a_force_no_model_has_marks_the_body_doubtful_and_least_squares_is_kept(tmp_path: Path):
+@pytest.mark.parametrize("with_holdout", [False, True])
+def test_a_force_no_model_has_marks_the_body_doubtful_and_least_squares_is_kept(tmp_path: Path, with_holdout: bool):
     """A damping on a MuJoCo-made oven door, left out of the model (`twin bench diagnose --engine mujoco` case 41):
     the Newton fit bends the door's inertia about the hinge 40 % and more to replay its windows, least squares over
-    the rows where it moves stays within 5 %. Without a held-out recording to choose, the two disagree, so the
-    quantity is doubtful and least squares is kept."""
+    the rows where it moves stays within 5 %. The two disagree, so the quantity is doubtful and least squares is
+    kept; a held-out recording cannot judge them, the damping acting there too (the Newton fit replays it better)."""
     from benchmarks.diagnose_cases import determined_quantity, make_mujoco_cases, record_mujoco_joint_case, true_body
     from pipelines.identify.jointed import JointedConfig
 
     case = make_mujoco_cases(40, 10, 0)[41]
     assert case.effect.name == "viscous_damping" and case.shape == "oven_door"
-    trial, _, joint, placement, prior = record_mujoco_joint_case(case, tmp_path)
-    result = identify_jointed([trial], joint, placement, prior)
+    trial, holdout, joint, placement, prior = record_mujoco_joint_case(case, tmp_path)
+    result = identify_jointed([trial], joint, placement, prior, holdout if with_holdout else None)
     assert result.disagreement["axis_inertia"] > JointedConfig().disagreement_share
-    assert result.doubtful == ("axis_inertia",) and result.selected == "least_squares"
+    assert "axis_inertia" in result.doubtful and result.selected == "least_squares"
     truth = determined_quantity(case, true_body(case))
     assert determined_quantity(case, result.inertial) == pytest.approx(truth, rel=0.05)
 
