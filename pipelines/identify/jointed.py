@@ -92,9 +92,9 @@ class JointedConfig:
     disagreement_share: float = 0.1
     """The Newton fit and least squares disagreeing on a determined quantity by more than this share of it mark it
     doubtful (two estimates that far apart cannot both be within 5 %), and least squares is kept, with or without a
-    held-out recording. On clean recordings of either engine they stay within 6.3 %; a breakaway or a damping left out of an
-    oven door's model put them 22-51 % apart, least squares within 1.3 % of the truth, the Newton fit, which bends the
-    body until the windows replay, 21-52 % off (docs/joints.md)."""
+    held-out recording. On clean recordings of either engine they stay within 6.3 %; a breakaway or a damping left
+    out of an oven door's model put them 22-51 % apart, least squares within 1.3 % of the truth, the Newton fit,
+    which bends the body until the windows replay, 21-52 % off (docs/joints.md)."""
     least_squares_min_speed: float = 0.3
     """The least squares keeps the rows where |q'| exceeds this fraction of its RMS over the recording (all rows
     where a Stribeck breakaway is fitted): around a reversal or a hold the low-passed tanh friction is not how a
@@ -232,8 +232,8 @@ class _BodyMap:
 
 def equation_of_motion_rows(recording, joint: JointFit, body: _BodyMap, config: JointedConfig) -> dict:
     """One recording's equation of motion as regression rows on a uniform grid (zero-phase low-passed q
-    and tau), ends trimmed where the low-pass rings (`lowpass_edge_samples`): "t_s", "q", "qd", "tau" [N], "columns" [N, base parameters] such that
-    columns @ (base parameters) = tau in the base model."""
+    and tau), ends trimmed where the low-pass rings (`lowpass_edge_samples`): "t_s", "q", "qd", "tau" [N],
+    "columns" [N, base parameters] such that columns @ (base parameters) = tau in the base model."""
     t = recording.pose.t_s
     q = joint_coordinates(joint, recording.pose)
     period = float(np.median(np.diff(t)))
