@@ -246,6 +246,9 @@ def equation_of_motion_rows(recording, joint: JointFit, body: _BodyMap, config: 
     # rows start once the part moves: while it is held still, tracker noise in q' switches tanh(q'/eps) at random
     start = int(np.argmax(np.abs(qs - qs[0]) > 0.02 * np.ptp(qs)))
     edge = lowpass_edge_samples(config.smoothing_hz, 1 / period)
+    if len(grid) - edge - max(edge, start) < 2 * len(body.names):
+        raise ValueError(f"{recording.path}: too short: the joint moves for less than {2 * edge * period:.2f} s clear "
+                         f"of the recording's ends")
     keep = slice(max(edge, start), -edge)
     cols = [qdd]
     if body.joint.type == "prismatic":

@@ -166,3 +166,11 @@ def test_the_equation_of_motion_rows_stop_short_of_where_the_low_pass_rings(tmp_
     assert abs(rows["qd"][-1]) > 0.5  # cut mid-swing [rad/s]
     within = residual[n:-n][np.abs(rows["qd"][n:-n]) > 0.3 * np.sqrt(np.mean(rows["qd"] ** 2))]
     assert np.sqrt(np.mean(residual[-n:] ** 2)) < 1.5 * np.sqrt(np.mean(within ** 2))
+
+
+def test_a_recording_too_short_for_the_rows_is_refused_by_name(tmp_path: Path):
+    """0.35 s of motion, less than the rows' two trimmed ends: one ValueError naming the file, not an empty fit."""
+    obj, _, recording = _recording(tmp_path, "drawer", 0, duration_s=0.75)
+    prior = uniform_density_prior(obj.mesh(), material_range(None)).inertial
+    with pytest.raises(ValueError, match=r"drawer\.mcap: too short"):
+        identify_jointed([recording], detect_kind(recording).joint, obj.placement(), prior)
