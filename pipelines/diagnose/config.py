@@ -32,7 +32,10 @@ class DiagnoseConfig:
     """A mass this many times above or below the geometry prior's is beyond what any material allows: a jointed
     part's is flagged doubtful, and a held body's refit with effects reads its prior's mass range as this wide."""
     unexplained_share: float = 0.2
-    """A stretch holding at least this share of a non-white residual is reported as unexplained."""
+    """A stretch holding at least this share of a non-white residual is reported as unexplained ..."""
+    unexplained_chance: float = 0.01
+    """... where noise with the residual's own spectrum puts as large a share in one stretch less often than
+    this (a false stretch in about one clean recording in 100)."""
     window_s: float = 0.1
     """Windows of the Newton replay [s]."""
     joint_window_s: float = 0.6

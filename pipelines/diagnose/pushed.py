@@ -203,8 +203,8 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
                                             recordings=names[s["recording"]])
                  for k, s in series.items()}
     t_after = series["after"]["t_s"]
-    left = (*unexplained(residuals["after"], config.unexplained_share, (t_after.min(), t_after.max()),
-                         series["after"]["residual"]),
+    left = (*unexplained(residuals["after"], config.unexplained_share, config.unexplained_chance,
+                         (t_after.min(), t_after.max()), series["after"]["residual"]),
             *_turns_against_friction(parts, names, body, sconfig, series["after"],
                                      final.effect[list(EFFECT_SLOTS["contact_offset"])]
                                      if "contact_offset" in best else np.zeros(2)))

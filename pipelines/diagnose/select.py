@@ -460,7 +460,7 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
                                     stride=stride),
         "after": analyse_residuals(eval_rows_after, _residual(eval_rows_after, model, com_tracked), stride=stride),
     }
-    left = unexplained(residuals["after"], config.unexplained_share)
+    left = unexplained(residuals["after"], config.unexplained_share, config.unexplained_chance)
     traces = {"t_s": trace_before["t_s"], "measured_position": trace_before["measured_position"],
               "before_position": trace_before["position"], "after_position": trace_after["position"],
               "window_s": trace_before["window_s"], "residual_t_s": eval_rows_before.t_s.tolist(),

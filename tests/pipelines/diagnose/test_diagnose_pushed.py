@@ -60,19 +60,19 @@ def test_stretches_end_with_their_recording_and_a_spread_mismatch_is_unexplained
     energy = np.ones(20)
     energy[7:13] = 100.0
     names = np.array(["a.mcap"] * 10 + ["b.mcap"] * 10)
-    stretches = _localise(t, energy, energy, np.ones(20), 4.0, recordings=names)
+    stretches = _localise(t, np.sqrt(energy)[:, None], 1, np.ones(20), 4.0, recordings=names)
     assert [(s["where"]["recording"], s["where"]["t_s"]) for s in stretches] == [("a.mcap", [7.0, 9.0]),
                                                                                   ("b.mcap", [0.0, 2.0])]
     spread = ResidualAnalysis(rms=[3.0, 1.0, 1.0], whiteness_p=[1e-9, 0.5, 0.5], xcorr_peak_lag_s=[0.0] * 3,
                               xcorr_peak=[0.0] * 3, correlation={}, localisation=[],
                               channels=("x", "y", "heading"))
     residual = np.c_[np.full(20, 3.0), np.ones(20), np.ones(20)]
-    (entry,) = unexplained(spread, 0.2, (0.0, 9.0), residual)
+    (entry,) = unexplained(spread, 0.2, 1e-3, (0.0, 9.0), residual)
     assert entry["where"] == {"t_s": [0.0, 9.0]} and entry["share"] == pytest.approx(9 / 11)
     assert entry["summary"].startswith("x residual not white")
-    assert unexplained(spread, 0.2) == ()  # without a span only stretches are reported
+    assert unexplained(spread, 0.2, 1e-3) == ()  # without a span only stretches are reported
     white = ResidualAnalysis(**{**spread.__dict__, "whiteness_p": [0.5] * 3})
-    assert unexplained(white, 0.2, (0.0, 9.0), residual) == ()
+    assert unexplained(white, 0.2, 1e-3, (0.0, 9.0), residual) == ()
 
 
 def test_sensor_bias_in_the_sensor_frame_when_a_force_axis_is_never_read():
