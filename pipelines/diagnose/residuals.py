@@ -239,15 +239,16 @@ def _localise(t: np.ndarray, residual: np.ndarray, block: int, speed: np.ndarray
 def unexplained(analysis: ResidualAnalysis, min_share: float, max_chance: float,
                 span_s: tuple[float, float] | None = None, residual: np.ndarray | None = None,
                 p_value: float = 1e-6) -> tuple[dict, ...]:
-    """DESIGN.md `unexplained` entries for what a chosen model leaves: the stretches holding at least `min_share`
-    of the residual that noise of the residual's own spectrum puts in one stretch less often than `max_chance`
-    (`_localise`). No whiteness test gates them: a stretch holding a third of a ringing residual made it look
-    whiter to a Ljung-Box test (p 2.9e-6), and the surrogates already are what a coloured residual does.
+    """DESIGN.md `unexplained` entries for what a chosen model leaves: when some channel is not white (Ljung-Box
+    p below `p_value`), the stretches holding at least `min_share` of the residual that noise of the residual's
+    own spectrum puts in one stretch less often than `max_chance` (`_localise`).
 
-    With `span_s` (the evaluation's time span [s]) and `residual` [N, channels], a residual in which no stretch
-    stands out but some channel is not white (Ljung-Box p below `p_value`: a mismatch spread over everything) is
-    reported per non-white channel over that span, with the channel's share of the residual.
+    With `span_s` (the evaluation's time span [s]) and `residual` [N, channels], a non-white residual in which no
+    stretch stands out (a mismatch spread over everything) is reported per non-white channel over that span,
+    with the channel's share of the residual.
     """
+    if min(analysis.whiteness_p) >= p_value:
+        return ()
     stretches = tuple({"summary": s["summary"], "where": s["where"], "share": s["share"]}
                       for s in analysis.localisation if s["share"] >= min_share and s["p_value"] < max_chance)
     if stretches or span_s is None or residual is None:
