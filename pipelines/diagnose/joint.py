@@ -29,7 +29,7 @@ import numpy as np
 from assets import Effect, FitMetrics
 from pipelines.identify import (
     JOINT_EFFECT_PARAMS, STRIBECK_SPEEDS, JointedConfig, equation_of_motion_rows, identify_jointed, joint_body,
-    joint_effect_columns, predicts_better, q_and_position_rmse, replay_jointed,
+    joint_effect_columns, moving_mask, predicts_better, q_and_position_rmse, replay_jointed,
 )
 
 from .residuals import analyse_joint_residual, describe, localise_joint_friction, unexplained
@@ -281,10 +281,10 @@ def diagnose_jointed(trials: list, holdout, joint, placement, prior, jconfig: Jo
     # on the rows where the part moves, as its least squares: where it sticks (a hold, a reversal) the friction
     # is whatever holds it, not the smooth tanh, and the effort left there reads as a force no model explains
     # (on clean Newton-made parts a hold kept 67 % of the residual in 0.4 s, a reversal 20 %)
-    moving = np.abs(eval_rows["qd"]) > jconfig.least_squares_min_speed * np.sqrt(np.mean(eval_rows["qd"] ** 2))
+    moves = moving_mask(eval_rows, jconfig.least_squares_min_speed)
 
     def analyse(r: np.ndarray):
-        return analyse_joint_residual(*(eval_rows[k][moving] for k in ("t_s", "q", "qd", "tau")), r[moving],
+        return analyse_joint_residual(*(eval_rows[k][moves] for k in ("t_s", "q", "qd", "tau")), r[moves],
                                       stride=stride, unit=unit)
 
     r_before, r_after = residual(()), residual(best)

@@ -16,7 +16,8 @@ from .held import HeldIdentification, identify_held, tracked_to_object, with_wei
 from .inertia import nearest_physical_inertia, theta_from_physical
 from .jointed import (
     JOINT_EFFECT_PARAMS, STRIBECK_SPEEDS, JointedConfig, JointedIdentification, equation_of_motion_rows,
-    identify_jointed, joint_body, joint_effect_columns, joint_windows, q_and_position_rmse, replay_jointed,
+    identify_jointed, joint_body, joint_effect_columns, joint_windows, moving_mask, q_and_position_rmse,
+    replay_jointed,
 )
 from .kernels import EFFECT_SIZE
 from .kind import JointFit, KindDetection, detect_kind, joint_coordinates
@@ -42,7 +43,7 @@ __all__ = [
     "detect_kind", "equation_of_motion_rows", "estimate_force_bias", "estimate_noise_levels", "identify_free_body",
     "identify_held", "identify_jointed", "identify_least_squares", "identify_posterior", "identify_pushed",
     "identify_sliding", "joint_body", "joint_coordinates", "joint_effect_columns", "joint_windows", "make_windows",
-    "measured_friction", "nearest_physical_inertia", "newton_euler_rows", "object_frame_from_pi", "predicts_better",
-    "push_windows", "q_and_position_rmse", "recording_noise_levels", "renoised", "replay_jointed",
+    "measured_friction", "moving_mask", "nearest_physical_inertia", "newton_euler_rows", "object_frame_from_pi",
+    "predicts_better", "push_windows", "q_and_position_rmse", "recording_noise_levels", "renoised", "replay_jointed",
     "subject_from_json", "theta_from_physical", "tracked_to_object", "turn_check", "with_weighed_mass",
 ]

@@ -263,14 +263,19 @@ def equation_of_motion_rows(recording, joint: JointFit, body: _BodyMap, config: 
             "rate_hz": 1 / period}
 
 
+def moving_mask(rows: dict, min_speed: float) -> np.ndarray:
+    """Which of `equation_of_motion_rows` move: |q'| above `min_speed` times its RMS (`moving_rows`)."""
+    return np.abs(rows["qd"]) > min_speed * np.sqrt(np.mean(rows["qd"] ** 2))
+
+
 def moving_rows(rows: dict, min_speed: float) -> dict:
-    """`equation_of_motion_rows` where |q'| exceeds `min_speed` times its RMS.
+    """`equation_of_motion_rows` where |q'| exceeds `min_speed` times its RMS (`moving_mask`).
 
     Around a reversal or a hold a joint sticks as its friction law has it (MuJoCo's soft `frictionloss`, a
     Stribeck breakaway, a rigid Coulomb grip), not as the rows' low-passed tanh, and what is left correlates with
     q''. On MuJoCo-made drawers and doors, clean, least squares over every row put the determined quantity 0.3-8 %
     high, over these rows within 2.5 %; on an oven door with a breakaway 7x its friction +33 % against -0.6 %."""
-    keep = np.abs(rows["qd"]) > min_speed * np.sqrt(np.mean(rows["qd"] ** 2))
+    keep = moving_mask(rows, min_speed)
     return {k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in rows.items()}
 
 
