@@ -68,11 +68,11 @@ def main_std(effect) -> float | None:
     return None
 
 
-def _diagnose_case(case: Case, duration_s: float, config, with_holdout: bool = True) -> dict:
+def _diagnose_case(case: Case, duration_s: float, config, with_holdout: bool = True, push_late_s: float = 0.0) -> dict:
     """Record `case`, diagnose it as a build would, and score what came out (one table row, less its index).
 
     `with_holdout` False: as a build without --holdout, the diagnosis choosing on the trial alone; the held-out
-    recording then only scores the true model."""
+    recording then only scores the true model. push_late_s: a push's pose tracks start this much later [s]."""
     from pipelines.diagnose import diagnose_held, diagnose_jointed, diagnose_pushed
     from pipelines.identify import identify_jointed
     from pipelines.identify.posterior import Z95
@@ -96,6 +96,7 @@ def _diagnose_case(case: Case, duration_s: float, config, with_holdout: bool = T
                                              config.joint_window_s))
         elif kind == "push":
             trial, holdout, body, mu_prior = record_push_case(case, Path(tmp))
+            trial, holdout = (_pose_from(r, r.pose.t_s[0] + push_late_s) for r in (trial, holdout))
             given = holdout if with_holdout else None
             # the support the build would choose (`identify_pushed`), which the diagnosis then keeps
             support = identify_pushed([trial], given, body, mu_prior, SlidingConfig(), supports=SUPPORTS).config
@@ -166,6 +167,14 @@ def _diagnose_case(case: Case, duration_s: float, config, with_holdout: bool = T
     return row
 
 
+def _pose_from(recording, t_s: float):
+    """`recording` with its pose track from t_s [s] on (the other streams kept)."""
+    pose = recording.pose
+    keep = pose.t_s >= t_s
+    return replace(recording, pose=replace(pose, t_s=pose.t_s[keep], position=pose.position[keep],
+                                           quat_xyzw=pose.quat_xyzw[keep]))
+
+
 def kept_held_body(case: Case, trial, holdout, X_tracked_body):
     """The body a build keeps where the diagnosis chose no effect: `identify_held`'s posterior, its prior from
     the mesh and an unnamed material as a build's (`twin build` would keep its Newton fit instead only where
@@ -185,10 +194,11 @@ def _fmt(value, spec: str, width: int) -> str:
 
 def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0, seed: int = 0,
                    bootstraps: int = 40, cases: tuple[int, ...] = (), engine: str = "newton",
-                   with_holdout: bool = True) -> list[dict]:
+                   with_holdout: bool = True, push_late_s: float = 0.0) -> list[dict]:
     """Run every case (or only the indices `cases` of each engine's shuffled list, the same recordings as in the
     full run) on recordings made by `engine` ("newton", "mujoco" or "both"), print the table and the summary
-    per engine; returns the rows. `with_holdout` False diagnoses as a build without --holdout does."""
+    per engine; returns the rows. `with_holdout` False diagnoses as a build without --holdout does; push_late_s
+    starts each push's pose tracks that much later [s]."""
     from pipelines.diagnose import DiagnoseConfig
 
     if engine not in ("newton", "mujoco", "both"):
@@ -206,7 +216,8 @@ def bench_diagnose(concealed: int = 40, clean: int = 10, duration_s: float = 3.0
             if cases and k not in cases:
                 continue
             t0 = time.perf_counter()
-            row = _diagnose_case(case, duration_s, DiagnoseConfig(bootstraps=bootstraps, seed=case.seed), with_holdout)
+            row = _diagnose_case(case, duration_s, DiagnoseConfig(bootstraps=bootstraps, seed=case.seed), with_holdout,
+                                 push_late_s)
             row.update(index=k, seconds=time.perf_counter() - t0)
             rows.append(row)
             mm = lambda v: None if v is None else 1000 * v  # noqa: E731

@@ -229,6 +229,9 @@ class Bench:
     without_holdout: bool = False
     """diagnose: as a build without --holdout, the diagnosis choosing on the trial alone (the held-out
     recording scores the true model only)."""
+    push_late_s: float = 0.0
+    """diagnose: start each push recording's pose track this much later [s], as a recording that began at
+    another moment: the windows' tiling must not depend on where it began."""
     cases: tuple[int, ...] = ()
     """diagnose: only these case indices of the shuffled list (the same recordings as the full run; default all)."""
     workshop: bool = False
@@ -480,7 +483,8 @@ def _run_bench(command: Bench) -> None:
             diagnose.bench_diagnose_push_synth(command.seeds)
         else:
             diagnose.bench_diagnose(command.concealed, command.clean, command.duration_s, cases=command.cases,
-                                    engine=command.engine, with_holdout=not command.without_holdout)
+                                    engine=command.engine, with_holdout=not command.without_holdout,
+                                    push_late_s=command.push_late_s)
     elif command.what == "workshop":
         _benchmark("workshop").bench_workshop(command.seeds, command.levels, method=command.identify_with,
                                               parts=command.parts)
