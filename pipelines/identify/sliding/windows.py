@@ -89,26 +89,6 @@ def _planar_grid(recording, config: SlidingConfig, smooth: bool):
     return grid, xy, yaw
 
 
-_RUN = 10
-
-
-def _sliding(grid: np.ndarray, xy_smooth: np.ndarray, config: SlidingConfig) -> np.ndarray:
-    """Per sample of a smoothed track, whether the object slides: it lies in a run of at least _RUN samples
-    faster than config.moving_speed_m_s (a filter's edge or a tracker glitch is not motion)."""
-    speed = np.linalg.norm(np.gradient(xy_smooth, grid, axis=0), axis=1)
-    run_starts = np.convolve((speed > config.moving_speed_m_s).astype(float), np.ones(_RUN), "valid") == _RUN
-    return np.convolve(run_starts.astype(float), np.ones(_RUN))[:len(grid)] > 0
-
-
-def _window_starts(sliding: np.ndarray, samples: int, lead: int) -> np.ndarray:
-    """First samples of back-to-back windows of `samples` samples, tiled afresh `lead` samples before each
-    start of sliding and ending before the next's: each push from rest is seen from its rest on, whatever
-    the recording's first stamp."""
-    onsets = np.maximum(np.flatnonzero(sliding[1:] & ~sliding[:-1]) + 1 - lead, 0)
-    return np.array([s for b, e in zip([0, *onsets], [*onsets, len(sliding)]) for s in range(b, e - samples, samples)],
-                    dtype=int)
-
-
 def scatter_about_quadratic(track: np.ndarray) -> np.ndarray:
     """RMS of a window track [S+1, W, ...] about a quadratic in time fitted per window and channel, per
     window: the tracker's scatter, the motion taken out."""
@@ -179,11 +159,14 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
     push is the offset. `source` says which.
     """
     grid, xy, _ = _planar_grid(recording, config, smooth=True)
-    moving = np.flatnonzero(_sliding(grid, xy, config))
+    speed = np.linalg.norm(np.gradient(xy, grid, axis=0), axis=1)
+    run = 10  # samples: a filter's edge or a tracker glitch is not motion
+    fast = (speed > config.moving_speed_m_s).astype(float)
+    moving = np.flatnonzero(np.convolve(fast, np.ones(run), "valid") == run)
     w = recording.wrench
     t_w = w.t_s
     t_first = grid[moving[0]] if len(moving) else grid[-1]
-    t_last = grid[moving[-1]] if len(moving) else grid[-1]
+    t_last = grid[moving[-1] + run - 1] if len(moving) else grid[-1]
     before = t_w < t_first - margin_s
     after = t_w > t_last + margin_s
     away = np.zeros(len(t_w), dtype=bool)
@@ -218,11 +201,6 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: Force
                  moving_only: bool = True) -> PushWindows:
     """Back-to-back windows over the part of `recording` where the pusher touches the object.
 
-    The windows are tiled afresh from config.twist_half_width samples before each start of sliding (on the
-    smoothed track), so a push from rest is seen from its rest, its start velocity fitted on still samples;
-    tiled from the recording's first stamp instead, the diagnosis of a MuJoCo push named a 1.3 ms delay on a
-    clean one and missed a damping when that stamp came 0.15 s later (docs/pushes.md).
-
     The force is the recording's world-axes wrench force minus `bias` at its stamps; the contact
     point is the recording's contact track (required: a push is a force at a point).
     With moving_only, windows where the object does not slide are left out. The force is kept
@@ -234,7 +212,6 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: Force
             "(a PointStamped or pose topic; name it with --topic contact=/name)"
         )
     grid, xy, yaw = _planar_grid(recording, config, smooth=False)  # smoothing would blunt stops
-    sliding = _sliding(grid, _planar_grid(recording, config, smooth=True)[1], config)
     period = grid[1] - grid[0]
     substeps = max(1, int(round(period / config.dt_s)))
     dt = period / substeps
@@ -245,7 +222,7 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: Force
     touching = np.linalg.norm(contact_grid - xy, axis=1) < reach
     speed = np.linalg.norm(np.gradient(xy, grid, axis=0), axis=1)
     starts = []
-    for s in _window_starts(sliding, samples, config.twist_half_width):
+    for s in range(0, len(grid) - samples, samples):
         span = slice(s, s + samples + 1)
         if not touching[span].all():
             continue
