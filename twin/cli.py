@@ -231,7 +231,7 @@ class Bench:
     recording scores the true model only)."""
     push_late_s: float = 0.0
     """diagnose: start each push recording's pose track this much later [s], as a recording that began at
-    another moment: the windows' tiling must not depend on where it began."""
+    another moment (a push's windows are tiled from its first pose: docs/pushes.md)."""
     cases: tuple[int, ...] = ()
     """diagnose: only these case indices of the shuffled list (the same recordings as the full run; default all)."""
     workshop: bool = False
