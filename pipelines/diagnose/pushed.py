@@ -14,17 +14,23 @@ term of the same Newton rollout:
                    with speed (velocity-strengthening surfaces, a dragged cable)
   time_delay:      the wrench's clock against the poses' (separate clocks), the force
                    read between steps so that the delay has a gradient
+  contact_offset:  the force acting a fixed offset from the measured contact
+                   point, world x, y (a tracked tip's calibration; not in
+                   DESIGN.md's vocabulary)
 
-With three candidates there is no regression screen: each, alone, is refitted
+With four candidates there is no regression screen: each, alone, is refitted
 with mu and I_zz (and the windows' start velocities) on the training windows and
 replayed on the evaluation windows from measured starts, the held-out
 recordings' (or, without them, each half of every trial fitted on the other
-half). A candidate is chosen when it predicts those windows significantly
-better than the base model (`predicts_better`, per-window log error), the pair
+half), cut at `PHASES` tilings: a unit of evaluation is a recording's windows
+of every tiling that start in one window of the first, so that the choice does
+not rest on which samples happen to share a window. A candidate is chosen when
+it predicts those units significantly better than the base model
+(`predicts_better`, per-unit log error), the pair
 of the two best when it beats the better alone. The choice must also predict
 better than the other support model's (`SUPPORTS`) own best explanation, or it
 stands in for how the face bears its load and is not reported. Inclusion
-probabilities are the share of bootstrap resamples of the evaluation windows in
+probabilities are the share of bootstrap resamples of the evaluation units in
 which a candidate predicts better.
 """
 
@@ -50,9 +56,26 @@ PUSHED_CANDIDATES = ("sensor_bias", "viscous_damping", "time_delay", "contact_of
 """Candidates of the sliding kind, in the order they are tried."""
 
 
+PHASES = 3
+"""Tilings the evaluation windows are cut at, each a window's length / PHASES after the last: which samples share
+a window changes the choice (docs/pushes.md, "Where the windows fall"), so it is made on all of them."""
+
+
+@dataclass(frozen=True)
+class _Tiles:
+    """A recording's windows at every tiling: windows; phase [W]: the tiling's index (0: the windows the fits
+    train on); tile [W]: the window of tiling 0 each starts in, which with the recording is its unit of
+    evaluation (overlapping windows are not independent)."""
+
+    windows: PushWindows
+    phase: np.ndarray
+    tile: np.ndarray
+
+
 @dataclass(frozen=True)
 class _Fold:
-    """Which windows train and which evaluate: per recording, a boolean mask over its windows."""
+    """Which windows train and which evaluate: per recording, a boolean mask over its windows of tiling 0
+    (train) and of every tiling (test, `_Tiles`)."""
 
     train: tuple[tuple[int, np.ndarray], ...]
     test: tuple[tuple[int, np.ndarray], ...]
@@ -61,40 +84,86 @@ class _Fold:
 @dataclass(frozen=True)
 class _Refit:
     """A candidate set refitted on one fold: the fit and its replay of the evaluation windows from measured
-    starts (residuals [S, W, 3]: x, y [m], heading x yaw length [m]; recording [W]: the index of each
-    window's recording)."""
+    starts (residuals [S, W, 3]: x, y [m], heading x yaw length [m]; recording, phase, tile [W]: each window's
+    recording and its `_Tiles` entries)."""
 
     fit: SlidingFit
     test: PushWindows
     residual: np.ndarray
     recording: np.ndarray
+    phase: np.ndarray
+    tile: np.ndarray
+
+
+def _take(w: PushWindows, mask: np.ndarray) -> PushWindows:
+    return replace(w, t_start_s=w.t_start_s[mask], start=w.start[mask], force=w.force[:, mask],
+                   contact=w.contact[:, mask], measured=w.measured[:, mask])
 
 
 def _select(parts: list[PushWindows], picks) -> PushWindows:
-    def take(w: PushWindows, mask: np.ndarray) -> PushWindows:
-        return replace(w, t_start_s=w.t_start_s[mask], start=w.start[mask], force=w.force[:, mask],
-                       contact=w.contact[:, mask], measured=w.measured[:, mask])
-
-    return concat_push_windows([take(parts[i], mask) for i, mask in picks if mask.any()])
+    return concat_push_windows([_take(parts[i], mask) for i, mask in picks if mask.any()])
 
 
-def _folds(parts: list[PushWindows], trials: int) -> list[_Fold] | None:
+def _tiles(recording, first: PushWindows, body: PlanarBody, sconfig: SlidingConfig, bias, t0_s: float) -> _Tiles:
+    """`recording`'s windows at every tiling, `first` (tiling 0, timed from t0_s) among them, timed from t0_s."""
+    samples = first.sample_count
+    parts, phase = [first], [np.zeros(first.window_count, int)]
+    for k in range(1, PHASES):
+        try:
+            w = push_windows(recording, body, sconfig, bias, phase=k * samples // PHASES)
+        except ValueError:  # no window of this tiling where the pusher touches a sliding object
+            continue
+        parts.append(replace(w, t_start_s=w.t_start_s - t0_s))
+        phase.append(np.full(w.window_count, k))
+    windows = concat_push_windows(parts)
+    tile = np.floor((windows.t_start_s - first.t_start_s[0]) / first.span_s + 1e-6).astype(int)
+    return _Tiles(windows, np.concatenate(phase), tile)
+
+
+def _folds(parts: list[PushWindows], tiles: list[_Tiles], trials: int) -> list[_Fold] | None:
     """The held-out recordings (indices from `trials` on) evaluate a fit on every trial; without them, the
-    first half of each trial's windows (in time) and the second half evaluate each other. None when the
-    trials hold a single window and there is no held-out recording: nothing can be held out."""
+    first half of each trial's windows (in time) and the second half evaluate each other, each on the windows of
+    every tiling that lie within its span. None when the trials hold a single window and there is no held-out
+    recording: nothing can be held out."""
     if len(parts) > trials:
-        everything = lambda idx: tuple((i, np.ones(parts[i].window_count, bool)) for i in idx)  # noqa: E731
-        return [_Fold(everything(range(trials)), everything(range(trials, len(parts))))]
+        return [_Fold(tuple((i, np.ones(parts[i].window_count, bool)) for i in range(trials)),
+                      tuple((i, np.ones(tiles[i].windows.window_count, bool)) for i in range(trials, len(parts))))]
     first = tuple((i, np.arange(parts[i].window_count) < parts[i].window_count / 2) for i in range(trials))
     second = tuple((i, ~mask) for i, mask in first)
     if not any(m.any() for _, m in first) or not any(m.any() for _, m in second):
         return None
-    return [_Fold(first, second), _Fold(second, first)]
+
+    def within(half):
+        out = []
+        for i, mask in half:
+            starts, t = parts[i].t_start_s[mask], tiles[i].windows.t_start_s
+            inside = np.zeros(len(t), bool)
+            if mask.any():
+                inside = (t >= starts.min() - 1e-9) & (t + parts[i].span_s <= starts.max() + parts[i].span_s + 1e-9)
+            out.append((i, inside))
+        return tuple(out)
+
+    return [_Fold(first, within(second)), _Fold(second, within(first))]
+
+
+def _first_tiling(refit: _Refit) -> _Refit:
+    """`refit`'s evaluation windows of tiling 0 alone, back to back: the replay reported and plotted."""
+    keep = refit.phase == 0
+    return _Refit(refit.fit, _take(refit.test, keep), refit.residual[:, keep], refit.recording[keep],
+                  refit.phase[keep], refit.tile[keep])
 
 
 def _window_mse(residual: np.ndarray) -> np.ndarray:
     """Mean squared replay error per window [m^2] (position and heading arc)."""
     return np.mean(np.sum(residual**2, axis=-1), axis=0)
+
+
+def _unit_mse(refit: _Refit) -> np.ndarray:
+    """Mean squared replay error per unit of evaluation [m^2]: a recording's windows of every tiling that start
+    in one window of tiling 0."""
+    _, unit = np.unique(np.c_[refit.recording, refit.tile], axis=0, return_inverse=True)
+    unit = unit.ravel()
+    return np.bincount(unit, _window_mse(refit.residual)) / np.bincount(unit)
 
 
 def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: float,
@@ -115,11 +184,12 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     # each recording's windows, timed from its first pose
     parts = [replace(w, t_start_s=w.t_start_s - r.pose.t_s[0])
              for r, b in zip(recordings, biases) for w in [push_windows(r, body, sconfig, b)]]
-    folds = _folds(parts, len(trials))
+    tiles = [_tiles(r, p, body, sconfig, b, r.pose.t_s[0]) for r, p, b in zip(recordings, parts, biases)]
+    folds = _folds(parts, tiles, len(trials))
     testable = folds is not None
     if not testable:  # one window, no held-out recording: its replay and residuals alone, no candidate tried
         everything = tuple((i, np.ones(p.window_count, bool)) for i, p in enumerate(parts))
-        folds = [_Fold(everything, everything)]
+        folds = [_Fold(everything, tuple((i, t.phase == 0) for i, t in enumerate(tiles)))]
 
     def fit(names: tuple, train, support: str = sconfig.support) -> SlidingFit:
         return identify_sliding(_select(parts, train), body, replace(sconfig, support=support), mu_prior=mu_prior,
@@ -130,19 +200,22 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     other_refits: dict[tuple, list[_Refit]] = {}  # under the other support model
 
     def evaluate(names: tuple, support: str = sconfig.support) -> np.ndarray:
-        """Per-window held-out errors of `names` refitted on each fold's training windows."""
+        """Held-out errors per unit of evaluation (`_unit_mse`) of `names` refitted on each fold's training
+        windows."""
         cache = refits if support == sconfig.support else other_refits
         if names not in cache:
             out = []
             for fold in folds:
                 f = fit(names, fold.train, support)
-                test = _select(parts, fold.test)
+                test = _select([t.windows for t in tiles], fold.test)
                 residual = SlidingRollout(test, body, replace(sconfig, support=support)).residuals(f.theta, None,
                                                                                                  f.effect)
-                source = np.concatenate([np.full(mask.sum(), i) for i, mask in fold.test])
-                out.append(_Refit(f, test, residual, source))
+                picked = [(i, mask) for i, mask in fold.test if mask.any()]
+                source, phase, tile = (np.concatenate(c) for c in zip(*[
+                    (np.full(mask.sum(), i), tiles[i].phase[mask], tiles[i].tile[mask]) for i, mask in picked]))
+                out.append(_Refit(f, test, residual, source, phase, tile))
             cache[names] = out
-        return np.concatenate([_window_mse(r.residual) for r in cache[names]])
+        return np.concatenate([_unit_mse(r) for r in cache[names]])
 
     base = evaluate(())
     tried = PUSHED_CANDIDATES if testable else ()
@@ -171,7 +244,7 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
         stand_ins, best = best, ()
     scores = {"+".join(k) or "none": float(evaluate(k).mean()) for k in refits}
 
-    # inclusion: the share of bootstrap resamples of the evaluation windows a candidate predicts better in
+    # inclusion: the share of bootstrap resamples of the evaluation units a candidate predicts better in
     gains = {c: np.log(np.maximum(evaluate((c,)), 1e-300)) - np.log(np.maximum(base, 1e-300)) for c in tried}
     picks = rng.integers(0, len(base), (config.bootstraps, len(base)))
     inclusion = {c: float(np.mean(g[picks].mean(axis=1) < 0)) for c, g in gains.items()}
@@ -187,7 +260,7 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
             "heldout_mse_m2": {"none": scores["none"], name: scores[name], "chosen": scores["+".join(best)]},
         }))
 
-    before, after = refits[()], refits[best]
+    before, after = ([_first_tiling(r) for r in refits[k]] for k in ((), best))
     fits = {"before": _metrics(before, length), "after": _metrics(after, length)}
     for e in effects:
         e.evidence.update({"heldout_rmse_position_before_m": fits["before"].rmse_position_m,

@@ -198,8 +198,9 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
 
 
 def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: ForceBias | None = None,
-                 moving_only: bool = True) -> PushWindows:
-    """Back-to-back windows over the part of `recording` where the pusher touches the object.
+                 moving_only: bool = True, phase: int = 0) -> PushWindows:
+    """Back-to-back windows over the part of `recording` where the pusher touches the object, the first
+    `phase` pose samples after its first pose.
 
     The force is the recording's world-axes wrench force minus `bias` at its stamps; the contact
     point is the recording's contact track (required: a push is a force at a point).
@@ -222,7 +223,7 @@ def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: Force
     touching = np.linalg.norm(contact_grid - xy, axis=1) < reach
     speed = np.linalg.norm(np.gradient(xy, grid, axis=0), axis=1)
     starts = []
-    for s in range(0, len(grid) - samples, samples):
+    for s in range(phase, len(grid) - samples, samples):
         span = slice(s, s + samples + 1)
         if not touching[span].all():
             continue
