@@ -96,7 +96,7 @@ def _diagnose_case(case: Case, duration_s: float, config, with_holdout: bool = T
                                              config.joint_window_s))
         elif kind == "push":
             trial, holdout, body, mu_prior = record_push_case(case, Path(tmp))
-            trial, holdout = (_pose_from(r, r.pose.t_s[0] + push_late_s) for r in (trial, holdout))
+            trial, holdout = (pose_from(r, r.pose.t_s[0] + push_late_s) for r in (trial, holdout))
             given = holdout if with_holdout else None
             # the support the build would choose (`identify_pushed`), which the diagnosis then keeps
             support = identify_pushed([trial], given, body, mu_prior, SlidingConfig(), supports=SUPPORTS).config
@@ -167,7 +167,7 @@ def _diagnose_case(case: Case, duration_s: float, config, with_holdout: bool = T
     return row
 
 
-def _pose_from(recording, t_s: float):
+def pose_from(recording, t_s: float):
     """`recording` with its pose track from t_s [s] on (the other streams kept)."""
     pose = recording.pose
     keep = pose.t_s >= t_s
