@@ -139,7 +139,7 @@ def _folds(parts: list[PushWindows], tiles: list[_Tiles], trials: int) -> list[_
             starts, t = parts[i].t_start_s[mask], tiles[i].windows.t_start_s
             inside = np.zeros(len(t), bool)
             if mask.any():
-                inside = (t >= starts.min() - 1e-9) & (t + parts[i].span_s <= starts.max() + parts[i].span_s + 1e-9)
+                inside = (t >= starts.min() - 1e-9) & (t <= starts.max() + 1e-9)  # none across the halves' border
             out.append((i, inside))
         return tuple(out)
 

@@ -199,7 +199,7 @@ def estimate_force_bias(recording, config: SlidingConfig, margin_s: float = 0.3)
 
 def push_windows(recording, body: PlanarBody, config: SlidingConfig, bias: ForceBias | None = None,
                  moving_only: bool = True, phase: int = 0) -> PushWindows:
-    """Back-to-back windows over the part of `recording` where the pusher touches the object, the first
+    """Back-to-back windows over the part of `recording` where the pusher touches the object, tiled from
     `phase` pose samples after its first pose.
 
     The force is the recording's world-axes wrench force minus `bias` at its stamps; the contact
