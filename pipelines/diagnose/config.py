@@ -18,7 +18,8 @@ class DiagnoseConfig:
     folds: int = 3
     """Time blocks of the cross-validation used when there is no held-out recording."""
     com_sigma: float = 5.0
-    """A COM shift must be this many standard deviations (Mahalanobis) from the prior's ..."""
+    """A COM shift must be this many standard deviations (Mahalanobis) from the prior's (a push's contact offset, which
+    moves the force against the COM as a COM shift would, from zero) ..."""
     com_floor_m: float = 1e-3
     """... and at least this far [m], to be reported as nonuniform_density."""
     mesh_com_fraction: float = 0.01
