@@ -165,3 +165,19 @@ def test_a_clean_push_stays_silent_when_its_windows_fall_elsewhere(tmp_path):
     diagnosis, refit = diagnose_pushed([trial], [held], body, mu_prior, support,
                                        DiagnoseConfig(bootstraps=20, seed=case.seed))
     assert diagnosis.effects == () and refit is None
+
+
+def test_a_contact_offset_within_the_meshs_com_uncertainty_is_not_reported(tmp_path):
+    """A clean Newton-made push (`twin bench diagnose --push-synth`, seed 2) whose held-out push a 0.44 mm contact
+    offset (0.10 mm standard deviation) predicted better: an offset moves the force against the COM as a COM shift
+    would, and a 10 cm block's mesh puts its COM no closer than about 0.4 mm, so nothing is reported."""
+    recordings = []
+    for seed, offset in ((4, 0.010551466273330682), (5, 0.01274969367906038)):
+        path = tmp_path / f"push_{seed}.mcap"
+        write_push(path, PushConfig(half_extents_m=HALF, mass_kg=MASS, mu=0.3, offset_m=offset, seed=seed))
+        recordings.append(read_recording(path))
+    diagnosis, refit = diagnose_pushed(recordings[:1], recordings[1:], _body(), 0.5, SlidingConfig(),
+                                       DiagnoseConfig(bootstraps=20, seed=2))
+    assert diagnosis.effects == () and refit is None
+    offset = np.asarray(diagnosis.screening.coefficients["contact_offset"]["offset_m"])
+    assert 0 < np.linalg.norm(offset) < 1e-3
