@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from assets import Effect, FitMetrics
+from assets import Effect, FitMetrics, Inertial
 from pipelines.identify import (
     EFFECT_SLOTS, SUPPORTS, PlanarBody, PushWindows, SlidingConfig, SlidingFit, SlidingRollout, concat_push_windows,
     estimate_force_bias, estimate_noise_levels, identify_sliding, predicts_better, push_windows, turn_check,
@@ -53,7 +53,7 @@ from pipelines.identify import (
 from .residuals import analyse_planar_residual, describe, unexplained
 from .screening import Screening
 from .config import DiagnoseConfig
-from .select import Diagnosis
+from .select import Diagnosis, com_shift_stands_out, mesh_com_std
 
 PUSHED_CANDIDATES = ("sensor_bias", "viscous_damping", "time_delay", "contact_offset")
 """Candidates of the sliding kind, in the order they are tried."""
@@ -202,10 +202,13 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     refits: dict[tuple, list[_Refit]] = {}  # under sconfig's support
     other_refits: dict[tuple, list[_Refit]] = {}  # under the other support model
 
+    def refits_under(support: str) -> dict[tuple, list[_Refit]]:
+        return refits if support == sconfig.support else other_refits
+
     def evaluate(names: tuple, support: str = sconfig.support) -> np.ndarray:
         """Held-out errors per unit of evaluation (`_unit_mse`) of `names` refitted on each fold's training
         windows."""
-        cache = refits if support == sconfig.support else other_refits
+        cache = refits_under(support)
         if names not in cache:
             out = []
             for fold in folds:
@@ -226,9 +229,9 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
     def choose(support: str) -> tuple[list, tuple]:
         """The candidates that predict better under `support`, best first, and the set chosen."""
         none = evaluate((), support)
-        cache = refits if support == sconfig.support else other_refits
         passing = sorted((c for c in tried if predicts_better(evaluate((c,), support), none)
-                          and (c != "contact_offset" or all(offset_resolved(r.fit, body, config) for r in cache[(c,)]))),
+                          and (c != "contact_offset"
+                               or all(offset_resolved(r.fit, body, config) for r in refits_under(support)[(c,)]))),
                          key=lambda c: evaluate((c,), support).sum())
         best: tuple = (passing[0],) if passing else ()
         if len(passing) >= 2:
@@ -312,16 +315,15 @@ def diagnose_pushed(trials: list, holdouts: list, body: PlanarBody, mu_prior: fl
 
 
 def offset_resolved(fit: SlidingFit, body: PlanarBody, config: DiagnoseConfig) -> bool:
-    """Whether `fit`'s contact offset is one the push can tell from the mesh's own COM error: at least
-    `config.com_sigma` standard deviations (the fit's and the mesh's, `DiagnoseConfig.mesh_com_fraction` of a box's
-    radius of gyration, together) and `config.com_floor_m` from zero. On a clean Newton-made push a 0.44 mm offset
-    with a standard deviation of 0.10 mm predicted the held-out push better, by 1 % of its error."""
+    """Whether `fit`'s contact offset is one the push can tell from the mesh's own COM error, by the test a
+    held body's COM shift meets (`com_shift_stands_out`, the mesh's COM uncertainty that of the body's box). On a
+    clean Newton-made push a 0.44 mm offset with a standard deviation of 0.10 mm predicted the held-out push
+    better, by 1 % of its error."""
     slots = list(EFFECT_SLOTS["contact_offset"])
-    offset, std = fit.effect[slots], fit.effect_std[slots]
-    gyration = float(np.sqrt(np.sum(np.square(body.half_extents_m)) / 3.0))
-    variance = std**2 + (config.mesh_com_fraction * gyration) ** 2
-    distance = float(np.sqrt(np.sum(offset**2 / variance))) if np.all(np.isfinite(variance)) else 0.0
-    return distance >= config.com_sigma and float(np.linalg.norm(offset)) >= config.com_floor_m
+    hx, hy, hz = np.square(body.half_extents_m)
+    box = Inertial(body.mass_kg, (0.0, 0.0, 0.0), np.diag([hy + hz, hx + hz, hx + hy]) * body.mass_kg / 3.0)
+    return com_shift_stands_out(fit.effect[slots], np.diag(fit.effect_std[slots] ** 2),
+                                mesh_com_std(box, config)[:2], config)[1]
 
 
 def _effect_params(name: str, fit: SlidingFit, recording) -> tuple[dict, dict]:

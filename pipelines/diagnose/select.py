@@ -334,6 +334,18 @@ def mesh_com_std(prior: Inertial, config: DiagnoseConfig) -> np.ndarray:
     return np.full(3, config.mesh_com_fraction * gyration)
 
 
+def com_shift_stands_out(shift: np.ndarray, covariance: np.ndarray, mesh_std: np.ndarray,
+                         config: DiagnoseConfig) -> tuple[float, bool]:
+    """The Mahalanobis distance of a COM `shift` [m] over its `covariance` plus the reconstructed mesh's own COM
+    variance (`mesh_std` per axis), and whether that is a shift the scan can tell apart: beyond `config.com_sigma`
+    and `config.com_floor_m`."""
+    total = np.asarray(covariance, dtype=float) + np.diag(np.asarray(mesh_std, dtype=float) ** 2)
+    if not np.all(np.isfinite(total)):  # a direction the fit left undetermined
+        return 0.0, False
+    distance = float(np.sqrt(max(shift @ np.linalg.pinv(total) @ shift, 0.0)))
+    return distance, distance > config.com_sigma and float(np.linalg.norm(shift)) > config.com_floor_m
+
+
 def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
                   config: DiagnoseConfig = DiagnoseConfig(), com_std_m=None) -> Diagnosis:
     """Diagnose a held body from `trials` (Recordings); `holdout` (a Recording or None) chooses and validates.
@@ -365,13 +377,12 @@ def diagnose_held(trials: list, holdout, X_tracked_body: Pose, prior: Inertial,
     cov = _com_covariance(fitted_lib, tuple(n for n in best if n != "time_delay"), model.pi, X_tracked_body)
     mesh_std = mesh_com_std(prior, config) if com_std_m is None else np.broadcast_to(
         np.asarray(com_std_m, dtype=float), (3,))
+    mahalanobis, stands_out = com_shift_stands_out(shift, cov, mesh_std, config)
     cov = cov + np.diag(mesh_std**2)
-    mahalanobis = float(np.sqrt(max(shift @ np.linalg.pinv(cov) @ shift, 0.0)))
     chosen = "+".join(best) or "none"
     scores[f"{chosen} (uniform-density COM)"] = _heldout_score(trials, holdout, best, com_tracked, config,
                                                               com_held=com_prior_tracked)
-    density = (mahalanobis > config.com_sigma and np.linalg.norm(shift) > config.com_floor_m
-               and scores[chosen] < scores[f"{chosen} (uniform-density COM)"])
+    density = stands_out and scores[chosen] < scores[f"{chosen} (uniform-density COM)"]
 
     before_inertial = _physical(object_frame_from_pi(baseline.pi, X_tracked_body)[0])
     if density:

@@ -181,3 +181,21 @@ def test_a_contact_offset_within_the_meshs_com_uncertainty_is_not_reported(tmp_p
     assert diagnosis.effects == () and refit is None
     offset = np.asarray(diagnosis.screening.coefficients["contact_offset"]["offset_m"])
     assert 0 < np.linalg.norm(offset) < 1e-3
+
+
+def test_a_contact_offset_is_weighed_against_the_mesh_and_its_own_uncertainty():
+    """The rule's other side: the aluminium MIT block's 7 mm offset measured to 0.3 mm stands out of a 10 cm box's
+    0.4 mm COM uncertainty; the same offset left undetermined by the fit, or a 0.8 mm one, does not."""
+    from pipelines.diagnose.pushed import offset_resolved
+    from pipelines.identify.sliding import SlidingFit
+
+    def fit(offset_m, std_m):
+        effect, effect_std = np.zeros(7), np.zeros(7)
+        effect[5:7], effect_std[5:7] = offset_m, std_m
+        return SlidingFit(np.array([0.3, MASS, 1e-3]), np.zeros(3), (True, False, True), 1e-3, 1e-2, 10, 1,
+                          effect=effect, effect_std=effect_std)
+
+    config = DiagnoseConfig()
+    assert offset_resolved(fit((6.2e-3, -3.3e-3), 3e-4), _body(), config)
+    assert not offset_resolved(fit((6.2e-3, -3.3e-3), np.inf), _body(), config)
+    assert not offset_resolved(fit((8e-4, 0.0), 1e-5), _body(), config)
