@@ -127,8 +127,8 @@ def _true_pi(truth, grasp) -> np.ndarray:
 
 def jointed_effort_design(obj, motion, noise) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
     """The equation of motion of a one-joint motion known exactly, per F/T sample (the wrench held over each
-    sensor period): effort = columns @ (M, [m d along, across the true first moment], f_c), with
-    M (q'(t + dt) - q'(t)) / dt, Q_g at the period's middle and f_c sign(q'). Returns (names of
+    sensor period [t, t + dt], stamped at its centre): effort = columns @ (M, [m d along, across the true first
+    moment], f_c), with M (q'(t + dt) - q'(t)) / dt, Q_g at the period's middle and f_c sign(q'). Returns (names of
     `jointed_truth`'s quantities each column measures, columns [K, P], the effort's noise variance [K] from the
     sensor's (variance plus quantisation, isotropic in its axes, through the lever arm), moving [K])."""
     from scipy.spatial.transform import Rotation
@@ -136,7 +136,8 @@ def jointed_effort_design(obj, motion, noise) -> tuple[list[str], np.ndarray, np
     from assets.conventions import GRAVITY_M_S2
 
     held = motion.held
-    t, dt = held.t_wrench_s, held.t_wrench_s[1] - held.t_wrench_s[0]
+    dt = held.t_wrench_s[1] - held.t_wrench_s[0]
+    t = held.t_wrench_s - dt / 2  # each reading stamped at its period's centre
     q = np.interp(t + dt / 2, held.t_s, motion.q)
     qd = np.interp(t, held.t_s, motion.qd)
     qdd = (np.interp(t + dt, held.t_s, motion.qd) - qd) / dt
