@@ -283,12 +283,13 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
             f = tau * axis + config.constraint_force_n * (c[0] * perp[0] + c[1] * perp[1])
             t_h = config.constraint_torque_nm * c[3:6]
         force[k], torque[k] = f, t_h
-        # what reaches the joint: the projection a real joint transmits
-        applied = axis @ (np.cross(p_handle - origin, f) + t_h) if revolute else axis @ f
-        effort.assign(np.array([[applied]]))
         for j in range(config.substeps):
             i = k * config.substeps + j
             body_q[i] = state_a.body_q.numpy()[body]
+            # what reaches the joint: the projection a real joint transmits, about where the handle is now (the
+            # held world force's moment turns with the door within the period, as the sensor's mean has it)
+            p_now = body_q[i, :3] + Rotation.from_quat(body_q[i, 3:7]).apply(handle.position)
+            effort.assign(np.array([[axis @ (np.cross(p_now - origin, f) + t_h) if revolute else axis @ f]]))
             q_log[i] = state_a.joint_q.numpy()[0]
             qd_log[i] = state_a.joint_qd.numpy()[0]
             wp.launch(apply_joint_effort_and_passive_forces, dim=1,
