@@ -139,4 +139,6 @@ def test_a_clean_part_where_it_sticks_leaves_nothing_unexplained(tmp_path, index
     trial, holdout, joint, placement, prior = record_joint_case(case, tmp_path)
     diagnosis, _ = diagnose_jointed([trial], holdout, joint, placement, prior, config=DiagnoseConfig(bootstraps=10))
     assert diagnosis.effects == () and diagnosis.unexplained == ()
-    assert max(s["share"] for s in diagnosis.residuals["after"].localisation) < DiagnoseConfig().unexplained_share
+    # no stretch at all rising above the rest is the cleanest outcome
+    shares = [s["share"] for s in diagnosis.residuals["after"].localisation]
+    assert max(shares, default=0.0) < DiagnoseConfig().unexplained_share
