@@ -59,9 +59,12 @@ def joint_windows(recording, joint: JointFit, config: JointedConfig) -> JointWin
     states, and the joint effort over each Featherstone step.
 
     A reading is the wrench at its stamp (DESIGN.md: stamped t, it acted at t), a sensor's mean over its period
-    stamped at the period's centre; each step takes the readings interpolated at its own centre. Held from its
-    stamp for a period, the effort came half a period late, which a gravity moment that changes with q turns into
-    a torque against the motion: a 2.5 kg oven door's friction came back 7 % high at 500 Hz."""
+    stamped at the period's centre; each step takes the readings interpolated at its start. Featherstone's step is
+    semi-implicit Euler, which moves q with the velocity after the step's kick, so a force taken at the step's start
+    lands where exact integration puts it (leapfrog; the half-step start velocity this asks for is fitted per
+    window). Taken at the step's centre it came half a step early, and held from its stamp half a period late: a
+    gravity moment that changes with q turns either into a torque along or against the motion (a 2.5 kg oven
+    door's friction came back -3 % or +7 %)."""
     t = recording.pose.t_s
     q = joint_coordinates(joint, recording.pose)
     period = float(np.median(np.diff(t)))
@@ -81,7 +84,7 @@ def joint_windows(recording, joint: JointFit, config: JointedConfig) -> JointWin
         raise ValueError(f"{recording.path}: too short for one {config.window_s} s window of motion")
     dt = period / config.substeps
     steps = samples * config.substeps
-    t_step = grid[starts][None, :] + dt * (np.arange(steps)[:, None] + 0.5)  # each step's centre
+    t_step = grid[starts][None, :] + dt * np.arange(steps)[:, None]
     sample_idx = starts[None, :] + np.arange(samples + 1)[:, None]
     return JointWindows(dt, config.substeps, qg[sample_idx], qs[sample_idx], grid[sample_idx[1:]], qs[starts],
                         qds[starts], np.interp(t_step, t_wrench, tau))
