@@ -186,7 +186,7 @@ def test_a_heavy_doors_friction_is_not_read_from_its_gravity_load_out_of_time(tm
     reaches the rollout out of time reads as a torque along or against the motion. Made by MuJoCo at a 0.125 ms
     step (near continuous time), the door's 0.15 N m friction came back 7 % high with each reading held from its
     stamp (half a period late), 3 % low with each Featherstone step taking the effort at its centre (half a step
-    early for semi-implicit Euler), and 0.9 % high taken at its start."""
+    early for semi-implicit Euler), and 1.4 % high taken at its start."""
     from pipelines.synth.mujoco_engine import MujocoSettings, simulate_jointed_mujoco
 
     size = (0.5, 0.02, 0.35)
