@@ -137,7 +137,7 @@ def jointed_effort_design(obj, motion, noise) -> tuple[list[str], np.ndarray, np
 
     held = motion.held
     dt = held.t_wrench_s[1] - held.t_wrench_s[0]
-    t = held.t_wrench_s - dt / 2  # each reading stamped at its period's centre
+    t = np.floor(held.t_wrench_s / dt) * dt  # the start of the period each reading's stamp falls in
     q = np.interp(t + dt / 2, held.t_s, motion.q)
     qd = np.interp(t, held.t_s, motion.qd)
     qdd = (np.interp(t + dt, held.t_s, motion.qd) - qd) / dt

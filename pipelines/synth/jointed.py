@@ -125,8 +125,9 @@ class JointedMotionConfig:
     hold_s: float = 0.4
     """Still hold at q = 0 before the motion starts [s]."""
     control_rate_hz: float = 500.0
-    """Controller and F/T sensor rate [Hz]; the wrench is held between updates, each reading stamped at the centre
-    of the period it was held for (its mean over the period, as MuJoCo's readings are)."""
+    """Controller and F/T sensor rate [Hz]; the wrench is held between updates, each reading stamped at the mean
+    time of the steps it was applied at: half a step before its period's centre, since a semi-implicit step's
+    kick lands a force read at the step's start where exact integration would (as MuJoCo's readings are)."""
     substeps: int = 4
     """Featherstone steps per control period."""
     band_hz: tuple[float, float] = (0.3, 1.2)
@@ -305,7 +306,7 @@ def simulate_jointed(obj: JointedObject, config: JointedMotionConfig, rng: np.ra
     R_obj = Rotation.from_quat(body_q[:, 3:7])
     T_h = handle.matrix()
     held = HeldMotion(
-        t_wrench_s=(np.arange(steps) + 0.5) * control_dt,
+        t_wrench_s=(np.arange(steps) + 0.5) * control_dt - sim_dt / 2,
         force_n=force,
         torque_nm=torque,
         t_s=np.arange(n_sim) * sim_dt,

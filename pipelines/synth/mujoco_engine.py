@@ -189,17 +189,19 @@ def _sensor_wrench(model, data, force_sensor: int, torque_sensor: int, site: int
 
 
 def _run(model, data, servo: _Servo, reference, control_rate_hz: float, steps: int, substeps: int, wrench,
-         record, passive=None) -> np.ndarray:
-    """Step the model for `steps` sensor periods of `substeps` MuJoCo steps; returns the sensor's readings
-    [steps, 6] (force [N], torque [N m], as `wrench()` gives them).
+         record, passive=None) -> tuple[np.ndarray, np.ndarray]:
+    """Step the model for `steps` sensor periods of `substeps` MuJoCo steps; the sensor's readings [steps, 6]
+    are force [N] and torque [N m], as `wrench()` gives them.
 
     The servo set-points follow `reference(t)` -> (q_ref, qd_ref), updated at the start of each period and
     held. The reading of a period is the mean of the wrench over the period's steps, as each step applies
     it: F/T sensors oversample and average, and the servo's hold makes the wrench a sawtooth at the
     sensor rate (the hold's set-point falls behind a moving hand by v / rate), which a point sample taken
-    at a fixed phase of it would turn into a velocity-proportional bias. It stands for the period's
-    centre. `record(i)` stores the state of step i (0 .. steps * substeps); `passive()`, when given, sets
-    state-dependent forces (MuJoCo model or data fields) from the current forward pass.
+    at a fixed phase of it would turn into a velocity-proportional bias. Returns (stamps [s], readings):
+    each reading is stamped at the mean time of what it averages, for an Euler-family step half a step
+    before the period's centre (below). `record(i)` stores the state of step i (0 .. steps * substeps);
+    `passive()`, when given, sets state-dependent forces (MuJoCo model or data fields) from the current
+    forward pass.
     """
     import mujoco
 
@@ -243,14 +245,17 @@ def _run(model, data, servo: _Servo, reference, control_rate_hz: float, steps: i
             if rk4:  # RK4 integrates the wrench's slope within a step: the trapezoid over the step ends
                 readings[k] += (0.5 if j == 0 else 1.0) / substeps * np.concatenate(wrench())
                 mujoco.mj_step(model, data)
-            else:  # an Euler-family step applies the wrench at its start: a left sum
+            else:  # an Euler-family step applies the wrench at its start: a left sum. Its kick lands a force
+                # read at the step's start where exact integration would (x_{n+1} - 2 x_n + x_{n-1} = h^2 a_n),
+                # so the sum stands for the continuous wrench half a step before the period's centre
                 readings[k] += step_realized() / substeps
         if rk4:  # the period's end, still under its set-point
             forward()
             readings[k] += 0.5 / substeps * np.concatenate(wrench())
     forward()
     record(steps * substeps)
-    return readings
+    stamps = (np.arange(steps) + 0.5) / control_rate_hz - (0.0 if rk4 else h / 2)
+    return stamps, readings
 
 
 def simulate_held_mujoco(
@@ -312,10 +317,10 @@ def simulate_held_mujoco(
         mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, body, velocity, 0)
         data.xfrc_applied[body] = effect.body_wrench(velocity[3:], velocity[:3])
 
-    wrench = _run(model, data, servo, reference, config.control_rate_hz, steps, settings.substeps,
-                  lambda: _sensor_wrench(model, data, f_sensor, t_sensor, site), record,
-                  drag if effect is not None else None)
-    return HeldMotion(t_wrench_s=(np.arange(steps) + 0.5) / config.control_rate_hz, force_n=wrench[:, :3],
+    t_wrench, wrench = _run(model, data, servo, reference, config.control_rate_hz, steps, settings.substeps,
+                            lambda: _sensor_wrench(model, data, f_sensor, t_sensor, site), record,
+                            drag if effect is not None else None)
+    return HeldMotion(t_wrench_s=t_wrench, force_n=wrench[:, :3],
                       torque_nm=wrench[:, 3:], t_s=np.arange(n_sim) * model.opt.timestep,
                       grasp_position_m=position, grasp_quat_xyzw=quat)
 
@@ -479,9 +484,9 @@ def simulate_jointed_mujoco(
 
     passive = (profile if isinstance(effect, JointFrictionProfile) else
                stribeck if effect is not None and effect.name == "stribeck_friction" else None)
-    wrench = _run(model, data, servo, reference, config.control_rate_hz, steps, settings.substeps, at_handle,
-                  record, passive)
-    held = HeldMotion(t_wrench_s=(np.arange(steps) + 0.5) / config.control_rate_hz, force_n=wrench[:, :3],
+    t_wrench, wrench = _run(model, data, servo, reference, config.control_rate_hz, steps, settings.substeps,
+                            at_handle, record, passive)
+    held = HeldMotion(t_wrench_s=t_wrench, force_n=wrench[:, :3],
                       torque_nm=wrench[:, 3:], t_s=np.arange(n_sim) * model.opt.timestep,
                       grasp_position_m=position, grasp_quat_xyzw=quat)
     return JointedMotion(held, q_log, qd_log)

@@ -197,7 +197,8 @@ def simulate_pushed_mujoco(config: PushConfig, settings: MujocoSettings | None =
     """Run the push in MuJoCo; returns noiseless samples at `config.rate_hz` and the truth.
 
     Samples (as `simulate_push`'s, plus the sensor's own axes): "t_s" [s]; "position" [m] and "quat_xyzw"
-    of the block in world; "force": the force applied TO the block, world x, y [N]; "force_sensor": the
+    of the block in world; "force": the force applied TO the block, world x, y [N], at "t_force_s" (the
+    mean time of the steps a reading averages, by half a step off "t_s" if they are even); "force_sensor": the
     same force in the sensor's axes (x, y, z) [N]; "tip": the measured tip centre, world x, y [m];
     "sensor_quat_xyzw": the sensor's axes in world. settings: MuJoCo's (default `push_settings()`).
     """
@@ -253,6 +254,9 @@ def simulate_pushed_mujoco(config: PushConfig, settings: MujocoSettings | None =
     cumulative = np.concatenate([np.zeros((1, 3)), np.cumsum(padded, axis=0)])
     idx = np.arange(samples) * s
     force_sensor = (cumulative[idx + s] - cumulative[idx]) / s
+    # stamped at the mean time of the steps it averages: a step's force, read at its start, is the
+    # continuous force of that instant (a semi-implicit kick lands it where exact integration would)
+    result["t_force_s"] = result["t_s"] + ((s - 1) / 2 - s // 2) * model.opt.timestep
     result["force_sensor"] = force_sensor
     result["force"] = (force_sensor @ R_sensor.T)[:, :2]
     result["sensor_quat_xyzw"] = Rotation.from_matrix(R_sensor).as_quat()
@@ -294,7 +298,8 @@ def write_pushed_mujoco(path: Path, config: PushConfig, settings: MujocoSettings
     write_recording(
         path,
         pose=PoseTrack(t, position, quat, "world", "block", "/tracker/block"),
-        wrench=WrenchTrack(t + config.delay_s, force, np.zeros((n, 3)), "/pusher/wrench", frame),
+        wrench=WrenchTrack(data["t_force_s"] + 1.0 + config.delay_s, force, np.zeros((n, 3)), "/pusher/wrench",
+                           frame),
         contact=PointTrack(t, tip, "world", "/pusher/tip"),
         tf_static=statics,
     )

@@ -181,12 +181,12 @@ def test_a_recording_too_short_for_the_rows_is_refused_by_name(tmp_path: Path):
 
 
 def test_a_heavy_doors_friction_is_not_read_from_its_gravity_load_out_of_time(tmp_path: Path):
-    """A wrench stamped t acted at t (DESIGN.md); a sensor's reading is its period's mean, stamped at the period's
-    centre. On a 2.5 kg oven door, whose gravity moment (4.3 N m) changes by 4.3 N m per radian, an effort that
-    reaches the rollout out of time reads as a torque along or against the motion. Made by MuJoCo at a 0.125 ms
-    step (near continuous time), the door's 0.15 N m friction came back 7 % high with each reading held from its
-    stamp (half a period late), 3 % low with each Featherstone step taking the effort at its centre (half a step
-    early for semi-implicit Euler), and 1.4 % high taken at its start."""
+    """A wrench stamped t acted at t (DESIGN.md); a sensor's reading is its period's mean, stamped at the mean time
+    of what it averages. On a 2.5 kg oven door, whose gravity moment (4.3 N m) changes by 4.3 N m per radian, an
+    effort that reaches the rollout out of time reads as a torque along or against the motion. Made by MuJoCo at a
+    0.125 ms step (near continuous time), the door's 0.15 N m friction came back 7 % high with each reading held
+    from its stamp (half a period late), 3 % low with each Featherstone step taking the effort at its centre (half
+    a step early for semi-implicit Euler), and 0.7 % high taken at its start (0.7 % at MuJoCo's 0.5 ms step too)."""
     from pipelines.synth.mujoco_engine import MujocoSettings, simulate_jointed_mujoco
 
     size = (0.5, 0.02, 0.35)
