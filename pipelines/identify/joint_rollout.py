@@ -59,7 +59,7 @@ def joint_windows(recording, joint: JointFit, config: JointedConfig) -> JointWin
     states, and the joint effort over each Featherstone step.
 
     A reading is the wrench at its stamp (DESIGN.md: stamped t, it acted at t), a sensor's mean over its period
-    stamped at the period's centre; each step takes the readings interpolated at its start. Featherstone's step is
+    stamped at the mean time of what it averages; each step takes the readings interpolated at its start. Featherstone's step is
     semi-implicit Euler, which moves q with the velocity after the step's kick, so a force taken at the step's start
     lands where exact integration puts it (leapfrog; the half-step start velocity this asks for is fitted per
     window). Taken at the step's centre it came half a step early, and held from its stamp half a period late: a

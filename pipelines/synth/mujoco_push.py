@@ -22,8 +22,9 @@ What differs on purpose:
 - the force is what MuJoCo's `force` sensor reports on a site of the tip, a
   massless body welded to the carriage: the force the carriage exerts on the
   tip, which is the force the tip applies TO the block. Each reading is the
-  mean of the per-step readings over one sensor period centred on its stamp
-  (an F/T sensor's anti-alias filter, as the Newton engine's);
+  mean of the per-step readings over one sensor period around the pose's
+  stamp (an F/T sensor's anti-alias filter, as the Newton engine's), stamped
+  at the mean time of those steps;
 - integration by MuJoCo (`MujocoSettings.integrator`, `implicitfast` by
   default, or `RK4`) at 1 / (rate * substeps) s, at most 1 ms.
 
@@ -249,7 +250,7 @@ def simulate_pushed_mujoco(config: PushConfig, settings: MujocoSettings | None =
     if not np.all(np.isfinite(data.qpos)):
         raise RuntimeError("MuJoCo push diverged: lower the time step (MujocoSettings.substeps)")
     result = {k: np.asarray(v, dtype=float) for k, v in out.items()}
-    # the mean over one period centred on each stamp: steps j s - s/2 .. j s + s/2 - 1
+    # the mean over one period around each pose's stamp: steps j s - s/2 .. j s + s/2 - 1
     padded = np.concatenate([np.zeros((s // 2, 3)), step_force, np.zeros((s - s // 2, 3))])
     cumulative = np.concatenate([np.zeros((1, 3)), np.cumsum(padded, axis=0)])
     idx = np.arange(samples) * s

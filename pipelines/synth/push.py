@@ -165,7 +165,7 @@ def simulate_push(config: PushConfig) -> tuple[dict, PushTruth]:
             solver.step(state, nxt, None, contacts, config.dt_s)
             state, nxt = nxt, state
     data = {k: np.asarray(v, dtype=float) for k, v in out.items()}
-    # a sensor's anti-alias filter without delay: the mean over one period centred on the stamp
+    # a sensor's anti-alias filter without delay: the mean over one period around the pose's stamp
     kernel = np.ones(substeps) / substeps
     smooth = np.stack([np.convolve(np.asarray(step_force)[:, k], kernel, "same") for k in range(2)], axis=1)
     data["force"] = smooth[::substeps]
