@@ -22,9 +22,8 @@ What differs on purpose:
 - the force is what MuJoCo's `force` sensor reports on a site of the tip, a
   massless body welded to the carriage: the force the carriage exerts on the
   tip, which is the force the tip applies TO the block. Each reading is the
-  mean of the per-step readings over one sensor period around the pose's
-  stamp (an F/T sensor's anti-alias filter, as the Newton engine's), stamped
-  at the mean time of those steps;
+  mean of the per-step readings over one sensor period centred on its stamp
+  (an F/T sensor's anti-alias filter, as the Newton engine's);
 - integration by MuJoCo (`MujocoSettings.integrator`, `implicitfast` by
   default, or `RK4`) at 1 / (rate * substeps) s, at most 1 ms.
 
@@ -198,8 +197,7 @@ def simulate_pushed_mujoco(config: PushConfig, settings: MujocoSettings | None =
     """Run the push in MuJoCo; returns noiseless samples at `config.rate_hz` and the truth.
 
     Samples (as `simulate_push`'s, plus the sensor's own axes): "t_s" [s]; "position" [m] and "quat_xyzw"
-    of the block in world; "force": the force applied TO the block, world x, y [N], at "t_force_s" (the
-    mean time of the steps a reading averages, by half a step off "t_s" if they are even); "force_sensor": the
+    of the block in world; "force": the force applied TO the block, world x, y [N]; "force_sensor": the
     same force in the sensor's axes (x, y, z) [N]; "tip": the measured tip centre, world x, y [m];
     "sensor_quat_xyzw": the sensor's axes in world. settings: MuJoCo's (default `push_settings()`).
     """
@@ -250,14 +248,11 @@ def simulate_pushed_mujoco(config: PushConfig, settings: MujocoSettings | None =
     if not np.all(np.isfinite(data.qpos)):
         raise RuntimeError("MuJoCo push diverged: lower the time step (MujocoSettings.substeps)")
     result = {k: np.asarray(v, dtype=float) for k, v in out.items()}
-    # the mean over one period around each pose's stamp: steps j s - s/2 .. j s + s/2 - 1
+    # the mean over one period centred on each stamp: steps j s - s/2 .. j s + s/2 - 1
     padded = np.concatenate([np.zeros((s // 2, 3)), step_force, np.zeros((s - s // 2, 3))])
     cumulative = np.concatenate([np.zeros((1, 3)), np.cumsum(padded, axis=0)])
     idx = np.arange(samples) * s
     force_sensor = (cumulative[idx + s] - cumulative[idx]) / s
-    # stamped at the mean time of the steps it averages: a step's force, read at its start, is the
-    # continuous force of that instant (a semi-implicit kick lands it where exact integration would)
-    result["t_force_s"] = result["t_s"] + ((s - 1) / 2 - s // 2) * model.opt.timestep
     result["force_sensor"] = force_sensor
     result["force"] = (force_sensor @ R_sensor.T)[:, :2]
     result["sensor_quat_xyzw"] = Rotation.from_matrix(R_sensor).as_quat()
@@ -299,8 +294,7 @@ def write_pushed_mujoco(path: Path, config: PushConfig, settings: MujocoSettings
     write_recording(
         path,
         pose=PoseTrack(t, position, quat, "world", "block", "/tracker/block"),
-        wrench=WrenchTrack(data["t_force_s"] + 1.0 + config.delay_s, force, np.zeros((n, 3)), "/pusher/wrench",
-                           frame),
+        wrench=WrenchTrack(t + config.delay_s, force, np.zeros((n, 3)), "/pusher/wrench", frame),
         contact=PointTrack(t, tip, "world", "/pusher/tip"),
         tf_static=statics,
     )

@@ -104,8 +104,7 @@ def _pusher_path(config: PushConfig, t: np.ndarray) -> np.ndarray:
 
 
 def simulate_push(config: PushConfig) -> tuple[dict, PushTruth]:
-    """Run the push; returns noiseless samples at rate_hz {t_s, position, quat_xyzw, force, tip} and the truth;
-    the force's own stamps t_force_s are the mean times of the steps each reading averages."""
+    """Run the push; returns noiseless samples at rate_hz {t_s, position, quat_xyzw, force, tip} and the truth."""
     import newton
     import warp as wp
 
@@ -165,13 +164,10 @@ def simulate_push(config: PushConfig) -> tuple[dict, PushTruth]:
             solver.step(state, nxt, None, contacts, config.dt_s)
             state, nxt = nxt, state
     data = {k: np.asarray(v, dtype=float) for k, v in out.items()}
-    # a sensor's anti-alias filter without delay: the mean over one period around the pose's stamp
+    # a sensor's anti-alias filter without delay: the mean over one period centred on the stamp
     kernel = np.ones(substeps) / substeps
     smooth = np.stack([np.convolve(np.asarray(step_force)[:, k], kernel, "same") for k in range(2)], axis=1)
     data["force"] = smooth[::substeps]
-    # stamped at the mean time of the steps it averages: a step's force, read at its start, is the
-    # continuous force of that instant (a semi-implicit kick lands it where exact integration would)
-    data["t_force_s"] = data["t_s"] + ((substeps - 1) / 2 - substeps // 2) * config.dt_s
     return data, PushTruth(config.mu, m, izz)
 
 
@@ -208,8 +204,7 @@ def write_push(path: Path, config: PushConfig) -> PushTruth:
     write_recording(
         path,
         pose=PoseTrack(t, position, quat, "world", "block", "/tracker/block"),
-        wrench=WrenchTrack(data["t_force_s"] + 1.0 + config.delay_s, force, np.zeros((n, 3)), "/pusher/wrench",
-                           "world"),
+        wrench=WrenchTrack(t + config.delay_s, force, np.zeros((n, 3)), "/pusher/wrench", "world"),
         contact=PointTrack(t, tip, "world", "/pusher/tip"),
     )
     return truth
